@@ -1,0 +1,16 @@
+"""The one error type for bad user input.
+
+Every message is a single line, ``<where>: <field>: <problem>; <fix>``, so that
+the command line can print it as it is and a test can match it.
+"""
+
+
+class InputError(ValueError):
+    """Bad input from a user: a scene file, a grid, a command-line value, an EXR."""
+
+    def __init__(self, where, field, problem, fix=None):
+        self.where, self.field, self.problem, self.fix = str(where), field, problem, fix
+        text = f"{where}: {field}: {problem}" if field else f"{where}: {problem}"
+        if fix:
+            text += f"; {fix}"
+        super().__init__(" ".join(text.split()))
