@@ -14,3 +14,10 @@ class InputError(ValueError):
         if fix:
             text += f"; {fix}"
         super().__init__(" ".join(text.split()))
+
+
+class EnvironmentProblem(RuntimeError):
+    """A system component is missing: an LLVM for Mitsuba, an OpenGL 4.3 context.
+
+    The message is one line that names the component and how to install it.
+    """

@@ -7,6 +7,8 @@ kernel (``../shared/NOTES.md``). This must run before ``import mitsuba``.
 import glob
 import os
 
+from .errors import EnvironmentProblem
+
 _CANDIDATES = (
     "/usr/lib/x86_64-linux-gnu/libLLVM.so.{v}*",
     "/usr/lib/aarch64-linux-gnu/libLLVM.so.{v}*",
@@ -33,6 +35,6 @@ def ensure_libllvm():
         return current
     found = find_libllvm()
     if found is None:
-        raise RuntimeError(f"no libLLVM >= 16 found for Mitsuba's llvm_ad_rgb variant; {INSTALL_HINT}")
+        raise EnvironmentProblem(f"no libLLVM >= 16 found for Mitsuba's llvm_ad_rgb variant; {INSTALL_HINT}")
     os.environ["DRJIT_LIBLLVM_PATH"] = found
     return found

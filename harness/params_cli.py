@@ -1,0 +1,84 @@
+"""Renderer parameters on the command line: ``--grid 16,32`` -> typed lists.
+
+The command-line names are the ones users know from the paper (``--grid`` for
+the LPV resolution N); each maps onto one field of
+:class:`sslpv_gl.params.SSLPVParams`, whose own validation decides what is
+allowed.
+"""
+
+import dataclasses
+import itertools
+
+from .errors import InputError
+
+# command-line name -> SSLPVParams field
+CLI_TO_FIELD = {
+    "grid": "N", "steps": "steps", "mapping": "mapping", "resample": "resample", "outside": "outside",
+    "lookup": "lookup", "skip": "skip", "inject_offset": "inject_offset", "precision": "precision",
+    "rsm_size": "rsm_size", "inject_size": "inject_size",
+}
+FIELD_TO_CLI = {v: k for k, v in CLI_TO_FIELD.items()}
+
+
+def _field_types():
+    from sslpv_gl.params import SSLPVParams
+
+    return {f.name: f.type for f in dataclasses.fields(SSLPVParams)}
+
+
+def _convert(cli_name, text, type_name):
+    flag = "--" + cli_name.replace("_", "-")
+    try:
+        if type_name in ("int", int):
+            return int(text)
+        if type_name in ("float", float):
+            return float(text)
+    except ValueError:
+        raise InputError(flag, cli_name, f"{text!r} is not a{'n integer' if type_name in ('int', int) else ' number'}",
+                         "give numbers separated by commas, e.g. 16,32") from None
+    return text
+
+
+def parse_lists(values):
+    """``{'grid': '16,32', 'steps': None, ...}`` -> ``{'N': [16, 32]}`` (only the given ones)."""
+    types = _field_types()
+    out = {}
+    for cli_name, field in CLI_TO_FIELD.items():
+        raw = values.get(cli_name)
+        if raw is None:
+            continue
+        if isinstance(raw, (list, tuple)):
+            items = [str(x) for x in raw]
+        else:
+            items = [x.strip() for x in str(raw).split(",")]
+        if not items or any(x == "" for x in items):
+            raise InputError("--" + cli_name.replace("_", "-"), cli_name, f"empty value in {raw!r}",
+                             "give at least one value, separated by commas")
+        out[field] = [_convert(cli_name, x, types[field]) for x in items]
+    return out
+
+
+def params_from_cli(values):
+    """One :class:`SSLPVParams` from single command-line values (``render``)."""
+    from sslpv_gl.params import SSLPVParams
+
+    lists = parse_lists(values)
+    for field, vals in lists.items():
+        if len(vals) != 1:
+            raise InputError("--" + FIELD_TO_CLI[field].replace("_", "-"), FIELD_TO_CLI[field],
+                             f"takes one value here, got {len(vals)}", "use 'sweep' for lists")
+    return SSLPVParams(**{k: v[0] for k, v in lists.items()})
+
+
+def expand(lists, base=None):
+    """Cartesian product of parameter lists -> list of validated SSLPVParams (input order kept)."""
+    from sslpv_gl.params import SSLPVParams
+
+    base = dict(base or {})
+    keys = list(lists)
+    combos = itertools.product(*(lists[k] for k in keys)) if keys else [()]
+    out = []
+    for combo in combos:
+        kw = dict(base, **dict(zip(keys, combo)))
+        out.append(SSLPVParams(**kw))
+    return out
