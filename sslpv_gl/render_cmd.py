@@ -1,0 +1,59 @@
+"""``sslpv-harness render SCENE --grid N --steps K ... --out DIR``: one SSLPV render.
+
+Writes, atomically (the folder appears complete or not at all):
+
+* ``full.exr`` -- subsurface + direct reflection, linear RGB, top row first;
+* ``subsurface.exr`` -- the SSLPV part, with the coverage ``mask`` as an extra layer;
+* ``preview.png`` -- the full image, auto exposure;
+* ``render.json`` -- every parameter, scene name and content hash, GL renderer,
+  per-stage GPU timings (ms), warnings and image size.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from harness.atomic import atomic_dir
+from harness.imageio import auto_exposure, write_exr, write_png
+from harness.scene import load_scene
+
+from .params import SSLPVParams
+
+__all__ = ["run_render"]
+
+
+def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, as_json=False, renderer=None):
+    """Render a scene and write the output folder; returns the ``render.json`` content.
+
+    ``renderer`` (an :class:`~sslpv_gl.renderer.SSLPVRenderer`) may be passed to
+    reuse a context; ``as_json`` only affects how the CLI prints the result.
+    """
+    from .renderer import SSLPVRenderer
+
+    params = params or SSLPVParams()
+    scene = load_scene(scene_name_or_path)
+    out_dir = Path(out_dir) if out_dir is not None else Path("renders") / scene.name
+    result = (renderer or SSLPVRenderer()).render(scene, params)
+    exposure = auto_exposure(result.full)
+    info = {
+        "scene": scene.name,
+        "scene_path": str(scene.path),
+        "content_hash": scene.content_hash,
+        "params": params.as_dict(),
+        "gl_renderer": result.gl_renderer,
+        "timings_ms": {k: float(v) for k, v in result.timings_ms.items()},
+        "width": scene.camera.width,
+        "height": scene.camera.height,
+        "covered_pixels": int(result.mask.sum()),
+        "preview_exposure": exposure,
+        "warnings": list(result.warnings),
+        "method": "SSLPV (Borlum et al., HPG 2011), GLSL renderer sslpv_gl",
+    }
+    with atomic_dir(out_dir) as tmp:
+        write_exr(tmp / "full.exr", result.full)
+        write_exr(tmp / "subsurface.exr", result.subsurface, extra={"mask": result.mask.astype("f4")})
+        write_png(tmp / "preview.png", result.full, exposure)
+        (tmp / "render.json").write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+    info["out_dir"] = str(out_dir)
+    return info

@@ -1,0 +1,119 @@
+"""Reflective shadow maps (Sec. 3.1): light frusta and the camera, as matrices.
+
+Each point light gets a square perspective frustum aimed at the mesh's
+bounding sphere, its half field of view ``asin(r / d)`` (times a 2 % margin)
+so that the sphere's cone fits exactly inside the frustum. The same frustum
+serves two renders:
+
+* the **injection RSM**, ``inject_size`` squared (256^2 by default): world
+  position, normal and flux ``Phi_p = I dOmega_p`` per texel, with
+  ``dOmega_p = A_p cos^3(theta_p) / near^2`` (authors' answer);
+* the **shadow map**, ``rsm_size`` squared (1024^2 by default), used only for
+  direct-light visibility in shading.
+
+The paper renders one 1024^2 RSM and uses "only 256^2 texel values for
+injection" (Sec. 5). Rendering the injection RSM separately at 256^2 over the
+same frustum gives each injection texel the flux of the 4x4 block of
+shadow-map texels it covers (``dOmega`` scales with the texel area), i.e. the
+same total flux with a 16x coarser spatial sampling, without reading the big
+map back or downsampling it.
+
+Matrices are NumPy float64, row-major, for column vectors; upload them with
+:func:`gl_bytes` (column-major float32).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view",
+           "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG"]
+
+#: Upper bound of the RSM half field of view (a light inside the bounding
+#: sphere would otherwise need a frustum wider than 180 degrees).
+MAX_RSM_HALF_FOV_DEG = 75.0
+
+
+@dataclass(frozen=True)
+class LightView:
+    view_proj: np.ndarray       # (4, 4) float64
+    tan_half: float             # tan of the half field of view (square frustum)
+    near: float
+    far: float
+    clipped: bool               # the half FOV was capped: part of the mesh may be missed
+
+
+def bounding_sphere(mesh):
+    """``(centre, radius)``: centre of the mesh's box, radius to the farthest vertex."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
+    radius = float(np.linalg.norm(v - centre, axis=1).max())
+    return centre, radius
+
+
+def look_at(origin, target, up):
+    """View matrix of the conventions' right-handed look-at (camera looks down -z)."""
+    o = np.asarray(origin, dtype=np.float64)
+    f = np.asarray(target, dtype=np.float64) - o
+    f /= np.linalg.norm(f)
+    r = np.cross(f, np.asarray(up, dtype=np.float64))
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = r, u, -f
+    m[:3, 3] = -m[:3, :3] @ o
+    return m
+
+
+def perspective(fov_y_deg, aspect, near, far):
+    """OpenGL perspective projection; ``fov_y_deg`` is the full vertical FOV."""
+    t = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = t / aspect, t
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def _any_up(forward):
+    f = forward / np.linalg.norm(forward)
+    for cand in ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)):
+        if abs(np.dot(f, cand)) < 0.9:
+            return np.array(cand)
+    return np.array((0.0, 1.0, 0.0))  # pragma: no cover
+
+
+def light_view(light_pos, centre, radius, margin=1.02):
+    """Square frustum from ``light_pos`` fitted to the bounding sphere (Sec. 3.1)."""
+    L = np.asarray(light_pos, dtype=np.float64)
+    c = np.asarray(centre, dtype=np.float64)
+    d = float(np.linalg.norm(c - L))
+    cap = np.radians(MAX_RSM_HALF_FOV_DEG)
+    half = np.arcsin(min(radius / d, 1.0)) * margin if d > 0 else cap
+    clipped = bool(half > cap)
+    half = min(half, cap)
+    near = max(d - radius, 1e-4 * max(d, radius)) * 0.5
+    far = d + 2.0 * radius
+    view = look_at(L, c, _any_up(c - L))
+    proj = perspective(np.degrees(2.0 * half), 1.0, near, far)
+    return LightView(proj @ view, float(np.tan(half)), near, far, clipped)
+
+
+def camera_view_proj(camera, centre, radius):
+    """Camera matrix (conventions' look-at/perspective), near/far fitted to the mesh."""
+    o = np.asarray(camera.origin, dtype=np.float64)
+    d = float(np.linalg.norm(np.asarray(centre) - o))
+    near = max(d - radius, 1e-4 * max(d, radius)) * 0.5
+    far = d + 2.0 * radius
+    view = look_at(o, camera.target, camera.up)
+    proj = perspective(camera.fov_y_deg, camera.width / camera.height, near, far)
+    return proj @ view
+
+
+def gl_bytes(mat):
+    """A (…, 4, 4) row-major matrix as column-major float32 bytes for a GLSL mat4."""
+    m = np.asarray(mat, dtype=np.float64)
+    return np.ascontiguousarray(np.swapaxes(m, -1, -2), dtype=np.float32).tobytes()

@@ -1,0 +1,95 @@
+#version 430
+// Sec. 3.3, Eqs. 4-7 (two-band form of Sec. 4):
+//   L_o = T (2/A) (c00/sqrt(4 pi) + 1/2 sqrt(3/(4 pi)) c10^(n)),  A = dx^2,
+//   c10^(n) = n_y c1-1 + n_z c10 + n_x c11,
+// plus, for a dielectric boundary, GGX rough-dielectric reflection of each
+// point light with shadow-map visibility (Mitsuba's roughdielectric, reflection half).
+// LOOKUP_TRILINEAR and MAX_LIGHTS are #defined by the host.
+#include "sh.glsl"
+#include "optics.glsl"
+
+in vec3 v_pos;
+in vec3 v_nrm;
+
+uniform sampler3D u_acc_r;      // accumulation grid per colour
+uniform sampler3D u_acc_g;
+uniform sampler3D u_acc_b;
+uniform vec3  u_bbox_min;
+uniform vec3  u_bbox_size;
+uniform int   u_N;
+uniform float u_area;           // A = dx^2 (Eq. 5)
+uniform float u_eta;            // 1 = index-matched (null boundary)
+uniform float u_alpha;          // GGX roughness
+uniform vec3  u_cam_pos;
+uniform int   u_n_lights;       // 0 for index-matched: no surface reflection
+uniform vec3  u_light_pos[MAX_LIGHTS];
+uniform vec3  u_light_I[MAX_LIGHTS];
+uniform mat4  u_light_vp[MAX_LIGHTS];
+uniform sampler2D u_shadow;     // shadow-map atlas: world position (w = valid), one tile per light
+uniform int   u_shadow_size;    // tile size in texels
+uniform float u_shadow_texel[MAX_LIGHTS];   // world size of a texel at unit distance (2 tan / size)
+
+layout(location = 0) out vec4 out_full;      // rgb, a = coverage
+layout(location = 1) out vec4 out_sub;       // rgb, a = coverage
+layout(location = 2) out vec4 out_pos;       // debug: world position
+layout(location = 3) out vec4 out_nrm;       // debug: normal used
+
+vec4 grid_lookup(sampler3D g, vec3 p)
+{
+#if LOOKUP_TRILINEAR
+    return texture(g, (p - u_bbox_min) / u_bbox_size);          // voxel-centre convention, clamp to edge
+#else
+    ivec3 cell = clamp(ivec3(floor((p - u_bbox_min) / u_bbox_size * float(u_N))), ivec3(0), ivec3(u_N - 1));
+    return texelFetch(g, cell, 0);
+#endif
+}
+
+float shadow_visibility(int i, vec3 p, vec3 n)
+{
+    vec4 clip = u_light_vp[i] * vec4(p, 1.0);
+    vec2 uv = clip.xy / clip.w * 0.5 + 0.5;
+    if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) return 1.0;
+    float dist = length(p - u_light_pos[i]);
+    vec3 l = (u_light_pos[i] - p) / dist;
+    // slope-scaled bias: a few texel footprints, more at grazing light
+    float bias = 2.0 * u_shadow_texel[i] * dist / max(dot(n, l), 0.2);
+    ivec2 base = ivec2(uv * float(u_shadow_size));
+    float vis = 0.0;
+    for (int dy = -1; dy <= 1; ++dy)               // 3x3 percentage-closer filter
+        for (int dx = -1; dx <= 1; ++dx) {
+            ivec2 t = clamp(base + ivec2(dx, dy), ivec2(0), ivec2(u_shadow_size - 1));
+            vec4 s = texelFetch(u_shadow, t + ivec2(i * u_shadow_size, 0), 0);
+            vis += (s.w < 0.5 || dist <= length(s.xyz - u_light_pos[i]) + bias) ? 1.0 : 0.0;
+        }
+    return vis / 9.0;
+}
+
+void main()
+{
+    vec3 n = normalize(v_nrm);
+    vec3 wo = normalize(u_cam_pos - v_pos);          // towards the camera
+
+    // ---- subsurface: Eq. 4 with the area-light estimate (Eqs. 5-7)
+    float T = u_eta == 1.0 ? 1.0 : fresnel_transmittance(clamp(dot(wo, n), 0.0, 1.0), u_eta);
+    vec3 sub = T * vec3(sh_hemisphere_radiance(grid_lookup(u_acc_r, v_pos), n, u_area),
+                        sh_hemisphere_radiance(grid_lookup(u_acc_g, v_pos), n, u_area),
+                        sh_hemisphere_radiance(grid_lookup(u_acc_b, v_pos), n, u_area));
+
+    // ---- direct reflection off a dielectric boundary (none when index-matched)
+    vec3 refl = vec3(0.0);
+    for (int i = 0; i < u_n_lights; ++i) {
+        vec3 to_l = u_light_pos[i] - v_pos;
+        float d2 = dot(to_l, to_l);
+        vec3 wi = to_l * inversesqrt(d2);
+        float cos_i = dot(wi, n);
+        if (cos_i <= 0.0) continue;
+        float f = ggx_reflection(wi, wo, n, u_alpha, u_eta);
+        if (f <= 0.0) continue;
+        refl += u_light_I[i] / d2 * (f * cos_i * shadow_visibility(i, v_pos, n));
+    }
+
+    out_full = vec4(sub + refl, 1.0);
+    out_sub  = vec4(sub, 1.0);
+    out_pos  = vec4(v_pos, 1.0);
+    out_nrm  = vec4(n, 1.0);
+}
