@@ -1,0 +1,681 @@
+"""The results store: one SQLite file that a sweep or a nightly run fills and the report reads.
+
+A *run* is one invocation of a sweep (or nightly job); a *configuration* is one
+SSLPV render of one scene with one set of renderer parameters, compared with
+that scene's reference; each configuration has *metric* rows (one per image
+and metric, with its noise floor) and *timing* rows (ms per SSLPV stage).
+
+=================  ==============================================================
+table              columns
+=================  ==============================================================
+``runs``           id, kind (``sweep``, ``nightly``, ...), started_at, finished_at,
+                   date, git_commit, versions_json, machine_json, gl_renderer,
+                   config_json, out_dir, status (``running``, ``ok``, ...)
+``configurations`` id, run_id, scene, scene_hash, config_key, params_json, status
+                   (``ok`` | ``failed``), error, render_dir, reference_dir,
+                   created_at; UNIQUE(run_id, config_key)
+``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
+                   noise_floor, per_channel_json, params_json;
+                   PRIMARY KEY(config_id, image, metric)
+``timings``        config_id, stage (``rsm``, ``injection``, ``propagation``,
+                   ``shading``, ``total``), ms; PRIMARY KEY(config_id, stage)
+=================  ==============================================================
+
+Concurrency: the file is in WAL mode with a 30 s busy timeout, and every write
+is one ``BEGIN IMMEDIATE`` transaction, so several processes (Dask workers) can
+write to one store at once; each opens its own :class:`Store`. Do not put the
+file on a network file system (WAL needs shared memory between processes).
+
+Schema versions: ``PRAGMA user_version`` holds the number of migrations that
+have been applied; :data:`MIGRATIONS` is the ordered list. To change the
+schema, append a function to it (never edit an old one). A store written by a
+newer harness is refused untouched.
+
+Timestamps are UTC ISO 8601 (``2025-01-31T12:00:00+00:00``).
+"""
+
+import contextlib
+import csv
+import hashlib
+import importlib.metadata
+import json
+import math
+import os
+import platform
+import socket
+import sqlite3
+import subprocess
+import threading
+from datetime import datetime, timezone
+from pathlib import Path
+
+from .atomic import atomic_write
+from .errors import InputError
+
+#: Images that metrics are recorded for.
+IMAGES = ("subsurface", "full")
+#: SSLPV stages that timings are recorded for (``total`` is the whole frame).
+STAGES = ("rsm", "injection", "propagation", "shading", "total")
+#: Status of one configuration.
+CONFIG_STATUSES = ("ok", "failed")
+#: Packages whose versions :func:`versions` records.
+VERSIONED_PACKAGES = ("mitsuba", "drjit", "moderngl", "numpy")
+
+BUSY_TIMEOUT_MS = 30_000
+
+
+# ---------------------------------------------------------------- migrations
+
+def _migration_1(db):
+    """Create the four tables."""
+    _run_script(db, """
+        CREATE TABLE runs (
+            id            INTEGER PRIMARY KEY AUTOINCREMENT,
+            kind          TEXT NOT NULL,
+            started_at    TEXT NOT NULL,
+            finished_at   TEXT,
+            date          TEXT NOT NULL,
+            git_commit    TEXT,
+            versions_json TEXT NOT NULL,
+            machine_json  TEXT NOT NULL,
+            gl_renderer   TEXT,
+            config_json   TEXT NOT NULL,
+            out_dir       TEXT,
+            status        TEXT NOT NULL
+        );
+        CREATE TABLE configurations (
+            id            INTEGER PRIMARY KEY AUTOINCREMENT,
+            run_id        INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+            scene         TEXT NOT NULL,
+            scene_hash    TEXT NOT NULL,
+            config_key    TEXT NOT NULL,
+            params_json   TEXT NOT NULL,
+            status        TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+            error         TEXT,
+            render_dir    TEXT,
+            reference_dir TEXT,
+            created_at    TEXT NOT NULL,
+            UNIQUE (run_id, config_key)
+        );
+        CREATE INDEX configurations_scene ON configurations(scene, config_key);
+        CREATE TABLE metrics (
+            config_id        INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
+            image            TEXT NOT NULL,
+            metric           TEXT NOT NULL,
+            value            REAL NOT NULL,
+            noise_floor      REAL,
+            per_channel_json TEXT,
+            params_json      TEXT NOT NULL,
+            PRIMARY KEY (config_id, image, metric)
+        );
+        CREATE TABLE timings (
+            config_id INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
+            stage     TEXT NOT NULL,
+            ms        REAL NOT NULL CHECK (ms >= 0),
+            PRIMARY KEY (config_id, stage)
+        );
+    """)
+
+
+def _run_script(db, script):
+    """Run ``;``-separated DDL statement by statement (``executescript`` would
+    COMMIT the migration's transaction half-way)."""
+    for stmt in script.split(";"):
+        if stmt.strip():
+            db.execute(stmt)
+
+
+#: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
+#: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
+#: ``user_version``, so a failed migration leaves the store as it was.
+MIGRATIONS = [_migration_1]
+
+
+def schema_version():
+    """The schema version this harness writes (the number of migrations)."""
+    return len(MIGRATIONS)
+
+
+# ---------------------------------------------------------------- helpers
+
+def _now():
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def _plain(obj, canon=True):
+    """JSON-ready copy: numpy scalars/arrays to Python, tuples to lists, integral floats to int.
+
+    Integral floats become ints so that ``{"grid": 32.0}`` and ``{"grid": 32}``
+    give the same configuration key.
+    """
+    if isinstance(obj, dict):
+        return {str(k): _plain(v, canon) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v, canon) for v in obj]
+    if hasattr(obj, "tolist") and not isinstance(obj, (str, bytes)):  # numpy scalar / array
+        return _plain(obj.tolist(), canon)
+    if isinstance(obj, Path):
+        return str(obj)
+    if canon and isinstance(obj, float) and math.isfinite(obj) and obj.is_integer() and abs(obj) < 2**53:
+        return int(obj)
+    return obj
+
+
+def _dumps(obj, canon=True):
+    """Compact sorted JSON; ``canon`` also turns integral floats into ints (for keys)."""
+    return json.dumps(_plain(obj, canon), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _loads(text):
+    return None if text is None else json.loads(text)
+
+
+def _finite(where, field, value, allow_none=False):
+    """``value`` as a finite float, or an InputError naming the field."""
+    if value is None and allow_none:
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(where, field, f"is {value!r}, not a number", "record numbers only") from None
+    if not math.isfinite(v):
+        raise InputError(where, field, f"is {v}, not finite",
+                         "record finite numbers (a failed config has status 'failed')")
+    return v
+
+
+def git_commit(path=None):
+    """The commit hash of the git checkout at ``path`` (default: this harness's folder), or None."""
+    cwd = Path(path) if path is not None else Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
+                             timeout=10, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    sha = out.stdout.strip()
+    return sha if out.returncode == 0 and sha else None
+
+
+def versions():
+    """Versions of the renderers and the harness: ``{name: version or None}``."""
+    out = {}
+    for name in VERSIONED_PACKAGES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = None
+    from . import __version__
+    out["harness"] = __version__
+    return out
+
+
+def machine():
+    """Host name, CPU count and platform of this machine."""
+    return {"hostname": socket.gethostname(), "cpu_count": os.cpu_count(),
+            "platform": platform.platform(), "python": platform.python_version()}
+
+
+# ---------------------------------------------------------------- the store
+
+class Store:
+    """An SQLite results store; use it as a context manager.
+
+    Parameters
+    ----------
+    path : str or Path
+        The store file; created (with its folder) when missing.
+
+    Raises
+    ------
+    InputError
+        When the file is not an SQLite database, or was written by a newer
+        harness (then nothing in it is changed).
+
+    Examples
+    --------
+    >>> with Store(tmp / "results.sqlite") as st:                  # doctest: +SKIP
+    ...     run = st.start_run("sweep", {"scenes": ["slab"]})
+    ...     st.record_config(run, "slab", h, {"grid": 32, "steps": 16}, "ok",
+    ...                      metrics=rows, timings={"total": 4.2})
+    ...     st.finish_run(run, "ok")
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self._lock = threading.Lock()
+        self._db = None
+        if self.path.exists():
+            self._refuse_newer()
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None,
+                                 check_same_thread=False)
+        except sqlite3.Error as exc:
+            raise InputError(self.path, "file", f"cannot be opened ({exc})", "check the path and permissions") from exc
+        self._db = db
+        try:
+            db.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+            mode = db.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            if mode.lower() != "wal":
+                raise InputError(self.path, "journal_mode", f"could not switch to WAL (got {mode})",
+                                 "put the store on a local file system")
+            db.execute("PRAGMA foreign_keys = ON")
+            db.execute("PRAGMA synchronous = NORMAL")  # safe with WAL; a crash loses at most the last commit
+            self._migrate()
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise InputError(self.path, "file", f"is not a usable SQLite results store ({exc})",
+                             "pass a results store or a new file name") from exc
+        except BaseException:
+            self.close()
+            raise
+
+    # -- opening -------------------------------------------------------------
+
+    def _refuse_newer(self):
+        """Read user_version through a read-only connection, so a refused store is not touched."""
+        try:
+            ro = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
+                                 timeout=BUSY_TIMEOUT_MS / 1000)
+        except sqlite3.Error as exc:
+            raise InputError(self.path, "file", f"cannot be opened ({exc})", "check the path and permissions") from exc
+        try:
+            found = ro.execute("PRAGMA user_version").fetchone()[0]
+        except sqlite3.DatabaseError as exc:
+            raise InputError(self.path, "file", f"is not an SQLite database ({exc})",
+                             "pass a results store or a new file name") from exc
+        finally:
+            ro.close()
+        if found > schema_version():
+            raise InputError(self.path, "schema",
+                             f"store schema v{found} is newer than this harness (v{schema_version()})",
+                             "upgrade the harness")
+
+    def _migrate(self):
+        with self._write() as db:
+            found = db.execute("PRAGMA user_version").fetchone()[0]
+            if found > schema_version():  # a newer harness migrated it after our read-only check
+                raise InputError(self.path, "schema",
+                                 f"store schema v{found} is newer than this harness (v{schema_version()})",
+                                 "upgrade the harness")
+            for version in range(found, schema_version()):
+                MIGRATIONS[version](db)
+                db.execute(f"PRAGMA user_version = {version + 1}")
+
+    def close(self):
+        """Close the connection (also done on leaving the ``with`` block)."""
+        if self._db is not None:
+            self._db.close()
+            self._db = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    @property
+    def user_version(self):
+        return self._read("PRAGMA user_version")[0][0]
+
+    @property
+    def journal_mode(self):
+        return self._read("PRAGMA journal_mode")[0][0]
+
+    @contextlib.contextmanager
+    def _write(self):
+        """One write transaction: BEGIN IMMEDIATE takes the write lock up front (waiting up
+        to the busy timeout), so two writers never deadlock upgrading a read lock."""
+        if self._db is None:
+            raise ValueError(f"{self.path}: the store is closed")
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self._db
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._db.execute("COMMIT")
+
+    def _read(self, sql, args=()):
+        if self._db is None:
+            raise ValueError(f"{self.path}: the store is closed")
+        with self._lock:
+            cur = self._db.execute(sql, args)
+            names = [d[0] for d in cur.description] if cur.description else []
+            rows = cur.fetchall()
+        return [_Row(names, r) for r in rows]
+
+    # -- runs -----------------------------------------------------------------
+
+    def start_run(self, kind, config, gl_renderer=None, out_dir=None, git_commit=None, versions=None):
+        """Record the start of a run; returns its id.
+
+        ``config`` is the run's resolved configuration (JSON-ready dict).
+        ``versions`` defaults to :func:`versions`; ``git_commit`` is stored as
+        given (call :func:`git_commit` to fill it).
+        """
+        if not isinstance(kind, str) or not kind.strip():
+            raise InputError(self.path, "kind", f"is {kind!r}", "name the run kind, e.g. 'sweep' or 'nightly'")
+        vers = globals()["versions"]() if versions is None else versions
+        started = _now()
+        try:
+            config_json = _dumps(config if config is not None else {}, False)
+        except (TypeError, ValueError) as exc:
+            raise InputError(self.path, "config", f"is not JSON-serialisable ({exc})",
+                             "pass plain numbers, strings, lists and dicts") from exc
+        with self._write() as db:
+            cur = db.execute(
+                "INSERT INTO runs (kind, started_at, date, git_commit, versions_json, machine_json,"
+                " gl_renderer, config_json, out_dir, status) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                (kind, started, started[:10], git_commit, _dumps(vers), _dumps(machine()),
+                 gl_renderer, config_json, None if out_dir is None else str(out_dir), "running"))
+            return cur.lastrowid
+
+    def finish_run(self, run_id, status, gl_renderer=None):
+        """Mark a run finished with ``status`` (e.g. ``"finished"``, ``"failed"``, ``"interrupted"``).
+
+        ``gl_renderer`` (known only once a worker has rendered) replaces the
+        stored one when given.
+        """
+        with self._write() as db:
+            cur = db.execute("UPDATE runs SET finished_at = ?, status = ?, gl_renderer = COALESCE(?, gl_renderer)"
+                             " WHERE id = ?", (_now(), str(status), gl_renderer, run_id))
+            if cur.rowcount != 1:
+                raise InputError(self.path, "run_id", f"run {run_id} does not exist", "pass an id from start_run")
+
+    def runs(self, kind=None):
+        """All runs (oldest first) as dicts, JSON columns decoded (``versions``, ``machine``, ``config``)."""
+        sql = "SELECT r.*, (SELECT COUNT(*) FROM configurations c WHERE c.run_id = r.id) AS n_configs FROM runs r"
+        rows = self._read(sql + (" WHERE kind = ?" if kind else "") + " ORDER BY started_at, id",
+                          (kind,) if kind else ())
+        out = []
+        for r in rows:
+            d = dict(r)
+            d["versions"] = _loads(d.pop("versions_json"))
+            d["machine"] = _loads(d.pop("machine_json"))
+            d["config"] = _loads(d.pop("config_json"))
+            out.append(d)
+        return out
+
+    def run(self, run_id):
+        """One run as in :meth:`runs`, or an InputError when it does not exist."""
+        for r in self.runs():
+            if r["id"] == run_id:
+                return r
+        raise InputError(self.path, "run_id", f"run {run_id} does not exist", "list runs with Store.runs()")
+
+    # -- configurations --------------------------------------------------------
+
+    @staticmethod
+    def config_key(scene_hash, params):
+        """Stable key of one configuration: sha256 of the scene hash and the canonical params JSON.
+
+        Key order, tuples vs lists, numpy vs Python numbers and ``32.0`` vs
+        ``32`` do not change the key.
+        """
+        text = _dumps({"scene_hash": str(scene_hash), "params": params})
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+    def record_config(self, run_id, scene, scene_hash, params, status, error=None, metrics=(),
+                      timings=None, render_dir=None, reference_dir=None):
+        """Record one configuration with its metrics and timings in ONE transaction.
+
+        Either everything is written or nothing is (a bad metric value rolls
+        back the configuration row too). Recording a key that is already
+        recorded in the run as ``failed`` replaces it (a retry); one recorded
+        as ``ok`` raises an InputError.
+
+        Parameters
+        ----------
+        run_id : int
+        scene, scene_hash : str
+        params : dict
+            Every renderer parameter (grid, steps, mapping, ...), JSON-ready.
+        status : {"ok", "failed"}
+        error : str, optional
+            Why it failed (one line is best).
+        metrics : list of dict
+            Each ``{image, metric, value, noise_floor, per_channel, params}``
+            (rows of ``harness.metrics.compare_images`` plus ``image``).
+        timings : dict of str to float
+            Stage (:data:`STAGES`) -> milliseconds.
+        render_dir, reference_dir : path, optional
+            Where the SSLPV render and the reference images are.
+
+        Returns
+        -------
+        int
+            The configuration id.
+        """
+        where = f"{self.path} config {scene}"
+        if status not in CONFIG_STATUSES:
+            raise InputError(where, "status", f"is {status!r}", f"use one of {', '.join(CONFIG_STATUSES)}")
+        if not isinstance(params, dict):
+            raise InputError(where, "params", f"is a {type(params).__name__}", "pass a dict of renderer parameters")
+        try:
+            params_json = _dumps(params)
+        except (TypeError, ValueError) as exc:
+            raise InputError(where, "params", f"is not JSON-serialisable ({exc})",
+                             "pass plain numbers, strings, lists and dicts") from exc
+        key = self.config_key(scene_hash, params)
+        with self._write() as db:
+            old = db.execute("SELECT id, status FROM configurations WHERE run_id = ? AND config_key = ?",
+                             (run_id, key)).fetchone()
+            if old is not None:
+                if old[1] == "ok":
+                    raise InputError(where, "config_key", f"{key} is already recorded in run {run_id}",
+                                     "skip the keys in done_keys(run_id)")
+                db.execute("DELETE FROM configurations WHERE id = ?", (old[0],))
+            if db.execute("SELECT 1 FROM runs WHERE id = ?", (run_id,)).fetchone() is None:
+                raise InputError(where, "run_id", f"run {run_id} does not exist", "pass an id from start_run")
+            cur = db.execute(
+                "INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json, status,"
+                " error, render_dir, reference_dir, created_at) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                (run_id, str(scene), str(scene_hash), key, params_json, status,
+                 None if error is None else str(error),
+                 None if render_dir is None else str(render_dir),
+                 None if reference_dir is None else str(reference_dir), _now()))
+            cid = cur.lastrowid
+            # Rows are checked one at a time as they are inserted; a bad one
+            # raises inside the transaction and everything above rolls back.
+            for i, m in enumerate(metrics or ()):
+                f = f"metrics[{i}]"
+                image, name = m.get("image"), m.get("metric")
+                if image not in IMAGES:
+                    raise InputError(where, f"{f}.image", f"is {image!r}", f"use one of {', '.join(IMAGES)}")
+                if not isinstance(name, str) or not name:
+                    raise InputError(where, f"{f}.metric", f"is {name!r}", "name the metric")
+                pc = m.get("per_channel")
+                if pc is not None:
+                    pc = [_finite(where, f"{f}.per_channel", v) for v in pc]
+                try:
+                    db.execute(
+                        "INSERT INTO metrics (config_id, image, metric, value, noise_floor, per_channel_json,"
+                        " params_json) VALUES (?,?,?,?,?,?,?)",
+                        (cid, image, name, _finite(where, f"{f}.value", m.get("value")),
+                         _finite(where, f"{f}.noise_floor", m.get("noise_floor"), allow_none=True),
+                         None if pc is None else _dumps(pc, False), _dumps(m.get("params") or {}, False)))
+                except sqlite3.IntegrityError as exc:
+                    raise InputError(where, f, f"{image}/{name} is given twice ({exc})",
+                                     "record each (image, metric) once") from exc
+                except (TypeError, ValueError) as exc:
+                    if isinstance(exc, InputError):
+                        raise
+                    raise InputError(where, f"{f}.params", f"is not JSON-serialisable ({exc})",
+                                     "pass plain numbers, strings, lists and dicts") from exc
+            for stage, ms in (timings or {}).items():
+                if stage not in STAGES:
+                    raise InputError(where, "timings", f"unknown stage {stage!r}", f"use {', '.join(STAGES)}")
+                ms = _finite(where, f"timings.{stage}", ms)
+                if ms < 0:
+                    raise InputError(where, f"timings.{stage}", f"is {ms} ms", "record elapsed times >= 0")
+                db.execute("INSERT INTO timings (config_id, stage, ms) VALUES (?,?,?)", (cid, stage, ms))
+            return cid
+
+    def done_keys(self, run_id, include_failed=False):
+        """Config keys already recorded in ``run_id`` (status ``ok``; also ``failed`` if asked).
+
+        A resumed sweep skips these; failed ones are retried by default.
+        """
+        sql = "SELECT config_key FROM configurations WHERE run_id = ?"
+        if not include_failed:
+            sql += " AND status = 'ok'"
+        return {r[0] for r in self._read(sql, (run_id,))}
+
+    def configs(self, run_id=None, scene=None):
+        """Configurations (oldest first) as nested dicts.
+
+        Each has the ``configurations`` columns, ``run_*`` fields of its run,
+        ``params`` (dict), ``timings`` (stage -> ms), ``cost_ms`` (``total``,
+        else the sum of the stages, else None) and ``metrics``
+        (``{image: {metric: {value, noise_floor, per_channel, params}}}``).
+        """
+        where, args = self._filter(run_id, scene)
+        confs = self._read("SELECT c.*, r.kind AS run_kind, r.date AS run_date, r.started_at AS run_started_at,"
+                           " r.git_commit AS run_git_commit FROM configurations c JOIN runs r ON r.id = c.run_id"
+                           + where + " ORDER BY c.id", args)
+        out = {}
+        for c in confs:
+            d = dict(c)
+            d["params"] = _loads(d.pop("params_json"))
+            d["timings"], d["metrics"], d["cost_ms"] = {}, {}, None
+            out[d["id"]] = d
+        if not out:
+            return []
+        sub = "SELECT c.id FROM configurations c" + where
+        for m in self._read(f"SELECT * FROM metrics WHERE config_id IN ({sub})", args):
+            out[m["config_id"]]["metrics"].setdefault(m["image"], {})[m["metric"]] = {
+                "value": m["value"], "noise_floor": m["noise_floor"],
+                "per_channel": _loads(m["per_channel_json"]), "params": _loads(m["params_json"])}
+        for t in self._read(f"SELECT * FROM timings WHERE config_id IN ({sub})", args):
+            out[t["config_id"]]["timings"][t["stage"]] = t["ms"]
+        for d in out.values():
+            t = d["timings"]
+            d["cost_ms"] = t.get("total", sum(t.values()) if t else None)
+        return list(out.values())
+
+    def results(self, run_id=None, scene=None):
+        """Flat rows, one per (configuration, image, metric); a configuration without
+        metrics (a failure) gives one row with ``image``/``metric``/``value`` None.
+
+        Columns: run_id, config_id, scene, scene_hash, config_key, status,
+        error, render_dir, reference_dir, created_at, cost_ms, ``ms_<stage>``
+        for each stage, params (dict), image, metric, value, noise_floor,
+        per_channel (list or None), metric_params (dict).
+        """
+        rows = []
+        for c in self.configs(run_id, scene):
+            base = {k: c[k] for k in ("run_id", "id", "scene", "scene_hash", "config_key", "status", "error",
+                                      "render_dir", "reference_dir", "created_at", "cost_ms")}
+            base["config_id"] = base.pop("id")
+            for s in STAGES:
+                base[f"ms_{s}"] = c["timings"].get(s)
+            base["params"] = c["params"]
+            mrows = [(img, name, m) for img, ms in c["metrics"].items() for name, m in ms.items()]
+            if not mrows:
+                rows.append({**base, "image": None, "metric": None, "value": None, "noise_floor": None,
+                             "per_channel": None, "metric_params": None})
+            for img, name, m in mrows:
+                rows.append({**base, "image": img, "metric": name, "value": m["value"],
+                             "noise_floor": m["noise_floor"], "per_channel": m["per_channel"],
+                             "metric_params": m["params"]})
+        return rows
+
+    def metric_history(self, scene, params_key, metric, image="subsurface", kind=None):
+        """One metric of one configuration over all runs (oldest first), for nightly trends.
+
+        ``params_key`` is either a config key (same scene content and params)
+        or a params dict (same params, whatever the scene hash: the trend then
+        also shows changes of the scene). Each row: run_id, run_kind, date,
+        started_at, git_commit, scene_hash, config_key, status, value,
+        noise_floor (value None when that run's configuration failed).
+        """
+        if isinstance(params_key, dict):
+            cond, arg = "c.params_json = ?", _dumps(params_key)
+        else:
+            cond, arg = "c.config_key = ?", str(params_key)
+        sql = ("SELECT r.id AS run_id, r.kind AS run_kind, r.date, r.started_at, r.git_commit, c.scene_hash,"
+               " c.config_key, c.status, m.value, m.noise_floor FROM configurations c JOIN runs r ON r.id = c.run_id"
+               " LEFT JOIN metrics m ON m.config_id = c.id AND m.metric = ? AND m.image = ?"
+               f" WHERE c.scene = ? AND {cond}" + (" AND r.kind = ?" if kind else "")
+               + " ORDER BY r.started_at, r.id")
+        args = (metric, image, scene, arg) + ((kind,) if kind else ())
+        return [dict(r) for r in self._read(sql, args)]
+
+    def _filter(self, run_id, scene):
+        conds, args = [], []
+        if run_id is not None:
+            conds.append("c.run_id = ?")
+            args.append(run_id)
+        if scene is not None:
+            conds.append("c.scene = ?")
+            args.append(scene)
+        return (" WHERE " + " AND ".join(conds) if conds else ""), tuple(args)
+
+    # -- export ----------------------------------------------------------------
+
+    def export(self, path, run_id=None, scene=None):
+        """Write :meth:`results` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
+
+        Dicts and lists become JSON text columns (``params_json``,
+        ``per_channel_json``, ``metric_params_json``) and each parameter also
+        gets its own ``param.<name>`` column (JSON text). Floats are written
+        with ``repr`` so that they read back exactly. Returns the row count.
+        """
+        path = Path(path)
+        fmt = path.suffix.lower()
+        if fmt not in (".csv", ".parquet"):
+            raise InputError(path, "format", f"unknown extension {path.suffix!r}", "export to .csv or .parquet")
+        if fmt == ".parquet":
+            try:
+                import pyarrow as pa
+                import pyarrow.parquet as pq
+            except ImportError:
+                raise InputError(path, "format", "writing Parquet needs pyarrow, which is not installed",
+                                 "install pyarrow (pip install pyarrow) or export to .csv") from None
+        rows = self.results(run_id, scene)
+        pnames = sorted({k for r in rows for k in r["params"]})
+        flat = []
+        for r in rows:
+            d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params")}
+            d["params_json"] = _dumps(r["params"])
+            d["per_channel_json"] = None if r["per_channel"] is None else _dumps(r["per_channel"], False)
+            d["metric_params_json"] = None if r["metric_params"] is None else _dumps(r["metric_params"], False)
+            for p in pnames:
+                d[f"param.{p}"] = _dumps(r["params"][p]) if p in r["params"] else None
+            flat.append(d)
+        columns = EXPORT_COLUMNS + [f"param.{p}" for p in pnames]
+        with atomic_write(path) as tmp:
+            if fmt == ".parquet":
+                table = pa.Table.from_pylist(flat) if flat else pa.table({c: [] for c in columns})
+                pq.write_table(table, tmp)
+            else:
+                with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                    w = csv.DictWriter(fh, fieldnames=columns)
+                    w.writeheader()
+                    for d in flat:
+                        w.writerow({k: ("" if v is None else repr(v) if isinstance(v, float) else v)
+                                    for k, v in d.items()})
+        return len(flat)
+
+
+#: Fixed leading columns of :meth:`Store.export` (``param.<name>`` columns follow).
+EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "status", "error", "render_dir",
+                  "reference_dir", "created_at", "cost_ms"] + [f"ms_{s}" for s in STAGES] + [
+                  "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
+                  "metric_params_json"]
+
+
+class _Row(dict):
+    """A result row: a dict that can also be indexed by position."""
+
+    def __init__(self, names, values):
+        super().__init__(zip(names, values))
+        self._values = values
+
+    def __getitem__(self, key):
+        if isinstance(key, int):
+            return self._values[key]
+        return super().__getitem__(key)
