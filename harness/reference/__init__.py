@@ -1,0 +1,12 @@
+"""Ground truth: Mitsuba 3 volumetric path-traced references of the scene suite.
+
+Modules: :mod:`.phase` (the ``gridhg`` phase function), :mod:`.mitsuba_scene`
+(scene object -> Mitsuba dict), :mod:`.render` (one reference folder with noise
+estimates), :mod:`.cache` (content-addressed cache and the CLI glue). Importing
+this package does not import Mitsuba; :func:`.mitsuba_scene.use_variant` does.
+"""
+
+from .cache import default_cache_dir, reference_for, run_reference_cmd
+from .render import render_reference
+
+__all__ = ["default_cache_dir", "reference_for", "render_reference", "run_reference_cmd"]

@@ -1,0 +1,289 @@
+"""Build Mitsuba 3's description of a :class:`harness.scene.Scene` (the ground truth's input).
+
+One function, :func:`build_scene_dict`, turns the validated scene object into a
+``mi.load_dict`` dictionary. The choices it makes, and why:
+
+=====================  ======================================================================
+part                   Mitsuba plugin and settings
+=====================  ======================================================================
+object                 ``mi.Mesh`` from the scene's vertices, faces and vertex normals
+interior medium        ``heterogeneous``; ``sigma_t`` and ``albedo`` are ``gridvolume`` from
+                       the scene's ``(nz, ny, nx, 3)`` grids, ``scale = 1``, ``to_world`` =
+                       translate(bbox_min) * scale(bbox_max - bbox_min): voxel ``(i, j, k)``
+                       is centred at ``bbox_min + (idx + 0.5)/n * (bbox_max - bbox_min)``, the
+                       convention of ``docs/conventions.md`` (tested in
+                       ``tests/test_reference_validation.py``)
+grid filter            ``nearest``: the reference sees exactly the scene's voxels, the same
+                       piecewise-constant field the numpy checks integrate. Trilinear would
+                       smooth the field and shift its values near the box faces.
+phase function         stock ``hg`` when g is one constant, else ``gridhg``
+                       (:mod:`harness.reference.phase`) with the channel mean of g
+boundary               index-matched: ``null`` BSDF. dielectric: ``roughdielectric``, GGX,
+                       ``alpha = roughness``, ``int_ior = eta``, ``ext_ior = 1`` (see
+                       :data:`DIELECTRIC_NOTE`)
+camera                 ``perspective``, ``fov_axis = "y"``, ``to_world = look_at(...)``,
+                       ``hdrfilm`` RGB with a **box** filter (a pixel is the plain average over
+                       its footprint, so seeds give independent, unweighted estimates)
+sampler                ``independent`` (seeded per render)
+integrator             ``volpath``, ``max_depth = -1`` (unbounded: no truncation bias),
+                       ``rr_depth = 5`` (Mitsuba's default; Russian roulette is unbiased)
+lights                 ``point``, RGB intensity in W/sr; background black (no environment)
+=====================  ======================================================================
+"""
+
+import numpy as np
+
+from harness.errors import InputError
+from harness.llvm import ensure_libllvm
+
+DEFAULT_VARIANT = "llvm_ad_rgb"
+SUPPORTED_VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
+MAX_DEPTH = -1
+RR_DEPTH = 5
+GRID_FILTER = "nearest"
+
+DIELECTRIC_NOTE = (
+    "approximation: stock Mitsuba 3 cannot connect a point light through a smooth dielectric "
+    "(delta light through a delta interface renders black), so the boundary is a GGX roughdielectric "
+    "with alpha = boundary.roughness, int_ior = eta, ext_ior = 1; next-event estimation from medium "
+    "vertices is disabled (sample_emitters=False) because the interface blocks it anyway "
+    "(../shared/NOTES.md: same image, 4x faster)"
+)
+INDEX_MATCHED_NOTE = "exact: index-matched boundary rendered with a null BSDF"
+RGB_G_NOTE = ("Mitsuba RGB variants trace one direction per path for all channels: the phase function uses "
+              "the mean of the three channels of g")
+
+
+# --------------------------------------------------------------------------- variant
+
+def use_variant(variant=None):
+    """Select a Mitsuba variant (default ``llvm_ad_rgb``), register ``gridhg``, return the module.
+
+    Raises :class:`InputError` when the variant is unknown or cannot start on this
+    machine (for example ``cuda_ad_rgb`` without an NVIDIA GPU).
+    """
+    variant = variant or DEFAULT_VARIANT
+    if variant not in SUPPORTED_VARIANTS:
+        raise InputError("variant", "variant", f"unsupported Mitsuba variant {variant!r}",
+                         f"use one of: {', '.join(SUPPORTED_VARIANTS)}")
+    if variant.startswith("llvm"):
+        try:
+            ensure_libllvm()
+        except RuntimeError as exc:
+            raise InputError("variant", variant, str(exc).split(";")[0], str(exc).split("; ", 1)[-1]) from exc
+    import mitsuba as mi
+
+    try:
+        mi.set_variant(variant)
+        if variant.startswith("cuda"):
+            import drjit as dr
+
+            if not dr.has_backend(dr.JitBackend.CUDA):
+                raise RuntimeError("no CUDA device")
+    except (ImportError, AttributeError, RuntimeError) as exc:
+        raise InputError("variant", variant, f"is not available on this machine ({exc})",
+                         "use variant llvm_ad_rgb (CPU), or run on a machine with an NVIDIA GPU and driver") from exc
+    from . import phase
+
+    phase.register()
+    return mi
+
+
+# --------------------------------------------------------------------------- pieces
+
+def grid_to_world(bbox_min, bbox_max):
+    """The unit cube -> the medium box: translate(bbox_min) * scale(bbox_max - bbox_min)."""
+    import mitsuba as mi
+
+    lo = [float(v) for v in bbox_min]
+    ext = [float(b) - float(a) for a, b in zip(bbox_min, bbox_max)]
+    return mi.ScalarTransform4f().translate(lo).scale(ext)
+
+
+def grid_volume(grid, bbox_min, bbox_max, filter_type=GRID_FILTER):
+    """A ``gridvolume`` dict for a ``(nz, ny, nx, C)`` array over the medium box."""
+    import mitsuba as mi
+
+    arr = np.ascontiguousarray(grid, dtype=np.float32)
+    if arr.ndim != 4 or arr.shape[3] not in (1, 3):
+        raise ValueError(f"grid_volume: expected (nz, ny, nx, 1|3), got {arr.shape}")
+    return {"type": "gridvolume", "grid": mi.VolumeGrid(arr), "filter_type": filter_type,
+            "to_world": grid_to_world(bbox_min, bbox_max)}
+
+
+def phase_g_grid(medium):
+    """The single-channel g grid handed to ``gridhg`` (channel mean) and the largest channel spread."""
+    g = np.asarray(medium.g, dtype=np.float64)
+    mean = g.mean(axis=3, keepdims=True)
+    spread = float(np.abs(g - mean).max()) if g.size else 0.0
+    return mean.astype(np.float32), spread
+
+
+def phase_dict(medium, phase="auto", filter_type=GRID_FILTER):
+    """``hg`` for a constant (grey) g, else ``gridhg``; ``phase`` forces ``"hg"`` or ``"gridhg"``."""
+    g1, _ = phase_g_grid(medium)
+    constant = bool(np.all(g1 == g1.flat[0]))
+    if phase == "auto":
+        phase = "hg" if constant else "gridhg"
+    if phase == "hg":
+        if not constant:
+            raise ValueError("phase_dict: stock hg needs a constant g; use phase='gridhg'")
+        return {"type": "hg", "g": float(g1.flat[0])}
+    if phase == "gridhg":
+        return {"type": "gridhg",
+                "g": grid_volume(g1, medium.bbox_min, medium.bbox_max, filter_type)}
+    raise ValueError(f"phase_dict: unknown phase {phase!r}; use auto, hg or gridhg")
+
+
+def medium_dict(scene, albedo_override=None, phase="auto", filter_type=GRID_FILTER, sample_emitters=None):
+    """The ``heterogeneous`` interior medium of the object.
+
+    ``sample_emitters`` (next-event estimation from medium vertices) defaults to
+    True for an index-matched boundary and False for a dielectric one.
+    """
+    m = scene.medium
+    albedo = m.albedo if albedo_override is None else np.broadcast_to(
+        np.asarray(albedo_override, dtype=np.float32), m.albedo.shape)
+    return {
+        "type": "heterogeneous",
+        "sigma_t": grid_volume(m.sigma_t, m.bbox_min, m.bbox_max, filter_type),
+        "albedo": grid_volume(albedo, m.bbox_min, m.bbox_max, filter_type),
+        "scale": 1.0,
+        # NEE from inside a non-null boundary is always occluded: skip it (see DIELECTRIC_NOTE).
+        "sample_emitters": bool(scene.boundary.index_matched if sample_emitters is None else sample_emitters),
+        "phase": phase_dict(m, phase, filter_type),
+    }
+
+
+def bsdf_dict(boundary):
+    if boundary.index_matched:
+        return {"type": "null"}
+    return {"type": "roughdielectric", "distribution": "ggx", "alpha": float(boundary.roughness),
+            "int_ior": float(boundary.eta), "ext_ior": 1.0}
+
+
+def mitsuba_mesh(mesh, bsdf=None, interior=None, name="object"):
+    """An ``mi.Mesh`` with the scene's positions, faces and vertex normals (and optional BSDF/medium)."""
+    import mitsuba as mi
+
+    props = mi.Properties()
+    if bsdf is not None:
+        props["bsdf"] = mi.load_dict(bsdf)
+    if interior is not None:
+        props["interior"] = mi.load_dict(interior)
+    out = mi.Mesh(name, len(mesh.vertices), len(mesh.faces), props, has_vertex_normals=True)
+    params = mi.traverse(out)
+    params["vertex_positions"] = mi.Float(np.ascontiguousarray(mesh.vertices, np.float32).ravel())
+    params["faces"] = mi.UInt32(np.ascontiguousarray(mesh.faces, np.uint32).ravel())
+    params["vertex_normals"] = mi.Float(np.ascontiguousarray(mesh.normals, np.float32).ravel())
+    params.update()
+    return out
+
+
+def sensor_dict(camera, spp=1):
+    import mitsuba as mi
+
+    return {
+        "type": "perspective",
+        "fov_axis": "y",
+        "fov": float(camera.fov_y_deg),
+        "to_world": mi.ScalarTransform4f().look_at(origin=list(map(float, camera.origin)),
+                                                   target=list(map(float, camera.target)),
+                                                   up=list(map(float, camera.up))),
+        "film": {"type": "hdrfilm", "width": int(camera.width), "height": int(camera.height),
+                 "pixel_format": "rgb", "component_format": "float32", "rfilter": {"type": "box"}},
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    }
+
+
+def light_dicts(lights):
+    return {f"light_{i}": {"type": "point", "position": list(map(float, lt.position)),
+                           "intensity": {"type": "rgb", "value": list(map(float, lt.intensity))}}
+            for i, lt in enumerate(lights)}
+
+
+def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, lights=True,
+                     phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=RR_DEPTH,
+                     sample_emitters=None):
+    """Mitsuba ``load_dict`` dictionary for ``scene`` (the variant must be set: :func:`use_variant`).
+
+    ``albedo_override`` replaces the albedo grid (0 gives the pure absorber whose
+    image is subtracted to isolate subsurface light); ``extra_emitters`` maps
+    names to emitter/shape dicts added as they are (validation scenes use area
+    or environment emitters); ``lights=False`` drops the scene's point lights;
+    ``sample_emitters`` overrides the medium's next-event estimation (validation).
+    The seed is not part of the scene: it is passed to ``mi.render``.
+    """
+    d = {
+        "type": "scene",
+        "integrator": {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
+        "sensor": sensor_dict(scene.camera, spp),
+        "object": mitsuba_mesh(scene.mesh, bsdf_dict(scene.boundary),
+                               medium_dict(scene, albedo_override, phase, filter_type, sample_emitters)),
+    }
+    if lights:
+        d.update(light_dicts(scene.lights))
+    for key, value in (extra_emitters or {}).items():
+        if key in d:
+            raise ValueError(f"build_scene_dict: extra emitter name {key!r} is already used")
+        d[key] = value
+    return d
+
+
+def scene_notes(scene):
+    """Facts about the approximations made for ``scene``, for ``reference.json``."""
+    _, spread = phase_g_grid(scene.medium)
+    return {
+        "boundary": scene.boundary.kind,
+        "boundary_eta": float(scene.boundary.eta),
+        "boundary_roughness": float(scene.boundary.roughness),
+        "boundary_note": INDEX_MATCHED_NOTE if scene.boundary.index_matched else DIELECTRIC_NOTE,
+        "phase_note": RGB_G_NOTE,
+        "g_channel_spread": spread,
+        "grid_filter": GRID_FILTER,
+        "integrator": {"type": "volpath", "max_depth": MAX_DEPTH, "rr_depth": RR_DEPTH},
+    }
+
+
+# --------------------------------------------------------------------------- camera rays and mask
+
+def camera_rays(camera, offsets=((0.5, 0.5),)):
+    """Origins (3,) and unit directions (H, W, S, 3) through pixel positions ``(px + u, py + v)``.
+
+    Follows ``docs/conventions.md``: right = forward x up, NDC y up, row 0 at the top.
+    """
+    o = np.asarray(camera.origin, float)
+    fwd = np.asarray(camera.target, float) - o
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, np.asarray(camera.up, float))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    W, H = camera.width, camera.height
+    t = np.tan(np.radians(camera.fov_y_deg) / 2.0)
+    uv = np.asarray(offsets, float)
+    px = np.arange(W)[None, :, None] + uv[None, None, :, 0]
+    py = np.arange(H)[:, None, None] + uv[None, None, :, 1]
+    x = (px / W * 2.0 - 1.0) * t * (W / H)
+    y = (1.0 - py / H * 2.0) * t
+    d = fwd + x[..., None] * right + y[..., None] * up
+    return o, d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def coverage_mask(scene, sub=4):
+    """Fraction of each pixel's footprint that sees the mesh, (H, W) float32 in [0, 1].
+
+    ``sub`` x ``sub`` stratified rays per pixel (conventions' camera math), traced
+    with ``mi.Scene.ray_intersect`` against the mesh alone. The variant must be set.
+    """
+    import mitsuba as mi
+
+    g = (np.arange(sub) + 0.5) / sub
+    offsets = np.stack(np.meshgrid(g, g, indexing="xy"), -1).reshape(-1, 2)
+    o, d = camera_rays(scene.camera, offsets)
+    H, W, S, _ = d.shape
+    flat = d.reshape(-1, 3).astype(np.float32)
+    mscene = mi.load_dict({"type": "scene", "object": mitsuba_mesh(scene.mesh)})
+    ray = mi.Ray3f(mi.Point3f(*[mi.Float(np.full(len(flat), v, np.float32)) for v in o]),
+                   mi.Vector3f(*[mi.Float(flat[:, k]) for k in range(3)]))
+    hit = np.asarray(mscene.ray_intersect(ray).is_valid(), dtype=bool)
+    return hit.reshape(H, W, S).mean(axis=2).astype(np.float32)
