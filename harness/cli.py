@@ -53,7 +53,7 @@ def cmd_scenes(args):
 
 
 def cmd_reference(args):
-    from .reference.render import run_reference_cmd
+    from .reference.cache import run_reference_cmd
 
     result = run_reference_cmd(args.scene, out_dir=args.out, target=args.target, spp=args.spp,
                                variant=args.variant, force=args.force)
@@ -164,7 +164,8 @@ def build_parser():
     sp.add_argument("action", choices=["update", "show", "regenerate-references"])
     sp.add_argument("--scene", help="only this scene")
     sp.add_argument("--store", type=Path, help="store holding the new values (update)")
-    sp.add_argument("--yes", action="store_true", help="write without asking")
+    sp.add_argument("--into", type=Path, help="regenerate-references: write the checked new reference here "
+                    "instead of replacing the committed one")
     return p
 
 

@@ -58,6 +58,20 @@ def _positive(spec, key, default, where):
     return float(value)
 
 
+def _integer(spec, key, default, lo, hi, where):
+    value = spec.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise InputError(where, f"mesh.{key}", f"must be an integer in [{lo}, {hi}], got {value!r}", "change the value")
+    return value
+
+
+def _number(spec, key, default, where):
+    value = spec.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise InputError(where, f"mesh.{key}", f"must be a finite number, got {value!r}", "change the value")
+    return float(value)
+
+
 def _from_meshset(ms):
     m = ms.current_mesh()
     return np.asarray(m.vertex_matrix(), dtype=np.float64), np.asarray(m.face_matrix(), dtype=np.int32)
@@ -110,9 +124,7 @@ def build_mesh(spec, where, scene_dir):
     ms = pymeshlab.MeshSet()
     normals = None
     if kind == "sphere":
-        subdiv = int(spec.get("subdivisions", 4))
-        if not 1 <= subdiv <= 6:
-            raise InputError(where, "mesh.subdivisions", f"must be in [1, 6], got {subdiv}", "use 3 to 5")
+        subdiv = _integer(spec, "subdivisions", 4, 1, 6, where)
         ms.create_sphere(radius=_positive(spec, "radius", 1.0, where), subdiv=subdiv)
         v, f = _from_meshset(ms)
         v = v + center
@@ -121,10 +133,14 @@ def build_mesh(spec, where, scene_dir):
         if minor >= major:
             raise InputError(where, "mesh.minor_radius", f"{minor} must be smaller than major_radius {major}",
                              "lower minor_radius")
-        hseg, vseg = spec.get("segments", [96, 32])
-        ms.create_torus(hradius=major, vradius=minor, hsubdiv=int(hseg), vsubdiv=int(vseg))
+        segments = spec.get("segments", [96, 32])
+        if (not isinstance(segments, list) or len(segments) != 2
+                or not all(isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= 1024 for n in segments)):
+            raise InputError(where, "mesh.segments", f"must be two integers in [3, 1024], got {segments!r}",
+                             "write e.g. [96, 32]")
+        ms.create_torus(hradius=major, vradius=minor, hsubdiv=segments[0], vsubdiv=segments[1])
         v, f = _from_meshset(ms)
-        angle = np.radians(float(spec.get("rotate_x_deg", 0.0)))
+        angle = np.radians(_number(spec, "rotate_x_deg", 0.0, where))
         c, s = np.cos(angle), np.sin(angle)
         v = v @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]) + center
     elif kind == "box":
@@ -136,7 +152,7 @@ def build_mesh(spec, where, scene_dir):
         except Exception as exc:
             raise InputError(where, "mesh.path", f"cannot read {path.name} ({exc})", "give a PLY or OBJ file") from exc
         v, f = _from_meshset(ms)
-        v = v * float(spec.get("scale", 1.0)) + _vec3(spec, "translate", [0, 0, 0], where)
+        v = v * _positive(spec, "scale", 1.0, where) + _vec3(spec, "translate", [0, 0, 0], where)
     if len(f) == 0:
         raise InputError(where, "mesh", "has no faces", "give a closed triangle mesh")
     check_closed(v, f, where)

@@ -82,3 +82,15 @@ def expand(lists, base=None):
         kw = dict(base, **dict(zip(keys, combo)))
         out.append(SSLPVParams(**kw))
     return out
+
+
+def config_label(params):
+    """A short stable name for a configuration: the paper's three axes, then any non-default setting."""
+    from sslpv_gl.params import SSLPVParams
+
+    p = params if isinstance(params, dict) else params.as_dict()
+    label = f"N{p['N']}-K{p['steps']}-{p['mapping']}"
+    defaults = SSLPVParams().as_dict()
+    extra = [f"{FIELD_TO_CLI.get(k, k)}={v}" for k, v in sorted(p.items())
+             if k not in ("N", "steps", "mapping") and v != defaults.get(k)]
+    return label + ("-" + "-".join(extra) if extra else "")

@@ -248,6 +248,10 @@ def load_scene(name_or_path):
             or not all(isinstance(r, int) and not isinstance(r, bool) and 1 <= r <= 512 for r in res)):
         raise InputError(where, "medium.resolution", f"must be three integers in [1, 512] (nx, ny, nz), got {res!r}",
                          "write e.g. [64, 64, 64]")
+    extent = bmax - bmin
+    if np.ptp(extent) > 1e-9 * extent.max():
+        raise InputError(where, "medium.bbox_max", f"box extent {_fmt(extent)} is not a cube; SSLPV's LPV cells are "
+                         "cubes over this box", "give the box the same size on every axis")
     mlo, mhi = mesh.bbox
     if np.any(mlo < bmin) or np.any(mhi > bmax):
         raise InputError(where, "medium.bbox_min/bbox_max", f"box [{_fmt(bmin)}]..[{_fmt(bmax)}] does not enclose "
@@ -268,12 +272,15 @@ def load_scene(name_or_path):
         if flag:
             raise InputError(where, label, f"{_fmt(p)} lies inside the mesh", "move it outside the object")
 
+    tags = data.get("tags", [])
+    if not isinstance(tags, list) or not all(isinstance(t, str) for t in tags):
+        raise InputError(where, "tags", f"must be a list of strings, got {tags!r}", 'write e.g. tags = ["thin"]')
     tol = data.get("tolerances", {})
     if not isinstance(tol, dict):
         raise InputError(where, "tolerances", "must be a table", "write [tolerances]")
     scene = Scene(name=path.parent.name, path=scene_dir, units=units, description=str(data.get("description", "")),
                   mesh=mesh, camera=camera, lights=tuple(lights), boundary=boundary, medium=medium,
-                  tolerances=dict(tol), tags=tuple(data.get("tags", ())))
+                  tolerances=dict(tol), tags=tuple(tags))
     return dataclasses.replace(scene, content_hash=scene_hash(scene))
 
 

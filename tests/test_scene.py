@@ -95,7 +95,8 @@ class TestBadScenes:
         assert float(load_scene(folder).medium.sigma_t.mean()) == pytest.approx(3.0)
 
     def test_box_does_not_enclose_mesh(self, tmp_path):
-        expect_error(tmp_path, GOOD.replace("bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [0.9, 1.05, 1.05]"),
+        text = GOOD.replace("bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [0.9, 0.9, 0.9]")
+        expect_error(tmp_path, text.replace("bbox_min = [-1.05, -1.05, -1.05]", "bbox_min = [-0.9, -0.9, -0.9]"),
                      r"bbox.*does not enclose the mesh.*grow the box")
 
     def test_camera_inside_mesh(self, tmp_path):
@@ -186,3 +187,19 @@ class TestInside:
         z, y, x = np.meshgrid(c, c, c, indexing="ij")
         pts = np.stack([x, y, z], -1).reshape(-1, 3)
         assert np.array_equal(mask.reshape(-1), points_inside(s.mesh, pts))
+
+
+class TestBadMeshFields:
+    @pytest.mark.parametrize("old,new,pattern", [
+        ("subdivisions = 4", 'subdivisions = "x"', r"mesh\.subdivisions: must be an integer"),
+        ("subdivisions = 4", "subdivisions = 9", r"mesh\.subdivisions: must be an integer in \[1, 6\]"),
+        ('kind = "sphere"\nradius = 1.0\nsubdivisions = 4', 'kind = "torus"\nsegments = 5',
+         r"mesh\.segments: must be two integers"),
+        ('kind = "sphere"\nradius = 1.0\nsubdivisions = 4', 'kind = "torus"\nrotate_x_deg = "a"',
+         r"mesh\.rotate_x_deg: must be a finite number"),
+        ('tags = ["homogeneous", "high-albedo"]', 'tags = "abc"', r"tags: must be a list of strings"),
+        ("bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [1.05, 1.05, 2.05]", r"medium\.bbox_max: .*not a cube"),
+    ])
+    def test_one_line(self, tmp_path, old, new, pattern):
+        assert old in GOOD
+        expect_error(tmp_path, GOOD.replace(old, new, 1), pattern)

@@ -1,0 +1,303 @@
+"""Committed accuracy baselines and the small references they were measured against.
+
+Layout (all committed)::
+
+    baselines/<scene>.json            metric values with noise floors, per (size, configuration)
+    baselines/refs/<scene>/           a small (64x64) Mitsuba reference: subsurface.exr, full.exr,
+                                      half_a.exr, half_b.exr, mask.exr, reference.json
+    baselines/accuracy_matrix.toml    which configurations the pytest accuracy tests check
+
+A baseline entry is ``{"size": [W, H], "scene_hash": ..., "config": label, "params": {...},
+"metrics": {image: {metric: {"value", "noise_floor"}}}, "git_commit", "updated"}``.
+
+Commands (``sslpv-harness baselines ...``):
+
+* ``update --store S [--scene X]``: replace the entries of the configurations found in the
+  store's latest run (for one scene, or all), print a before/after table, change nothing else.
+* ``show [--scene X]``: print the entries.
+* ``regenerate-references [--scene X]``: render the small reference again with new seeds,
+  check it against the committed one with a per-pixel two-sided z-test that uses both noise
+  estimates, Bonferroni-corrected for the number of pixels (as Mitsuba's render tests do),
+  and refuse it if they disagree.
+"""
+
+import json
+import math
+import shutil
+import tomllib
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_dir, atomic_write
+from .errors import InputError
+from .scene import list_scenes, load_scene, scene_path
+
+REPO = Path(__file__).resolve().parent.parent
+BASELINE_DIR = REPO / "baselines"
+REF_DIR = BASELINE_DIR / "refs"
+MATRIX_FILE = BASELINE_DIR / "accuracy_matrix.toml"
+SMALL_SIZE = (64, 64)
+#: Family-wise false-rejection probability of the reference check (per image).
+SIGNIFICANCE = 0.01
+
+
+# --------------------------------------------------------------------------- files
+
+def baseline_path(scene_name):
+    return BASELINE_DIR / f"{scene_name}.json"
+
+
+def load_matrix(path=MATRIX_FILE):
+    """The accuracy-test matrix: scenes, configurations and per-test tolerances."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file", "does not exist", "restore baselines/accuracy_matrix.toml")
+    data = tomllib.loads(path.read_text())
+    return data
+
+
+def read_baseline(scene_name, check_scene=True):
+    """Entries of one scene's baseline file, validated against the scene as it is now."""
+    path = baseline_path(scene_name)
+    if not path.is_file():
+        return []
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(path, "json", f"is not valid JSON ({exc})", "restore it from git") from exc
+    if data.get("scene") != scene_name:
+        raise InputError(path, "scene", f"names {data.get('scene')!r}, not {scene_name!r}", "rename or fix the file")
+    if check_scene:
+        if not scene_path(scene_name).is_file():
+            raise InputError(path, "scene", f"scene {scene_name!r} no longer exists in reference_scenes/",
+                             "delete this baseline file or restore the scene")
+        scene = load_scene(scene_name)
+        for e in data.get("entries", []):
+            expected = scene.with_resolution(*e["size"]).content_hash
+            if e["scene_hash"] != expected:
+                raise InputError(path, f"entries[{e['config']} at {e['size'][0]}x{e['size'][1]}].scene_hash",
+                                 f"baseline was made for scene hash {e['scene_hash'][:12]} but the scene now "
+                                 f"hashes to {expected[:12]}",
+                                 f"if the scene change is intended, run `sslpv-harness baselines "
+                                 f"regenerate-references --scene {scene_name}` and then `baselines update`")
+    return data.get("entries", [])
+
+
+def all_baselines():
+    """Every baseline file checked: a file whose scene is gone is an error, not silently skipped."""
+    out = {}
+    for path in sorted(BASELINE_DIR.glob("*.json")):
+        name = path.stem
+        out[name] = read_baseline(name)
+    return out
+
+
+def find_entry(entries, size, params):
+    for e in entries:
+        if list(e["size"]) == list(size) and e["params"] == params:
+            return e
+    return None
+
+
+def committed_reference(scene):
+    """The committed small reference for ``scene`` (at its current size), or an error naming the fix."""
+    ref = REF_DIR / scene.name
+    meta = ref / "reference.json"
+    fix = f"run `sslpv-harness baselines regenerate-references --scene {scene.name}`"
+    if not meta.is_file():
+        raise InputError(ref, "reference", "is missing", fix)
+    info = json.loads(meta.read_text())
+    if info.get("content_hash") != scene.content_hash:
+        raise InputError(meta, "content_hash", f"reference was rendered for scene hash "
+                         f"{str(info.get('content_hash'))[:12]}, the scene now hashes to {scene.content_hash[:12]}",
+                         fix)
+    return ref
+
+
+def find_committed_reference(scene):
+    """Like :func:`committed_reference` but None when there is none for this exact scene."""
+    try:
+        return committed_reference(scene)
+    except InputError:
+        return None
+
+
+# --------------------------------------------------------------------------- update
+
+def _rows_from_store(store_path, scene=None):
+    from .store import Store
+
+    store_path = Path(store_path) if store_path else None
+    if store_path is None or not store_path.is_file():
+        raise InputError("--store", "store", f"no results store at {store_path}" if store_path else
+                         "no results store given",
+                         "pass --store with the store.sqlite of a sweep, a nightly run or a failed accuracy test")
+    with Store(store_path) as st:
+        runs = [r for r in st.runs() if r.get("n_configs")]
+        if not runs:
+            raise InputError(store_path, "runs", "the store holds no configurations", "run a sweep first")
+        configs = st.configs(run_id=runs[-1]["id"], scene=scene)
+    return [c for c in configs if c["status"] == "ok"]
+
+
+def _size_of(config):
+    meta = Path(config["reference_dir"] or "") / "reference.json"
+    if meta.is_file():
+        info = json.loads(meta.read_text())
+        return [int(info["width"]), int(info["height"])]
+    raise InputError(meta, "reference", "the configuration's reference is gone, so its image size is unknown",
+                     "re-run the sweep")
+
+
+def update(store_path, scene=None, yes=True, commit=None):
+    """Replace baseline entries with the values of the store's latest run; returns the before/after rows."""
+    from .params_cli import config_label
+    from .store import git_commit
+
+    if scene is not None and not scene_path(scene).is_file():
+        raise InputError("--scene", "scene", f"unknown scene {scene!r}", f"choose from: {', '.join(list_scenes())}")
+    configs = _rows_from_store(store_path, scene)
+    if not configs:
+        raise InputError(store_path, "configurations", f"no successful configuration{' of ' + scene if scene else ''}"
+                         " in the latest run", "run the sweep for that scene first")
+    changed, table = {}, []
+    now = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    for c in configs:
+        name = c["scene"]
+        if name not in changed:
+            changed[name] = read_baseline(name, check_scene=False)
+        size = _size_of(c)
+        current = load_scene(name).with_resolution(*size).content_hash
+        if c["scene_hash"] != current:
+            raise InputError(store_path, f"{name}.scene_hash", "the store's values were measured on an older "
+                             "version of the scene", "re-run the sweep on the current scene")
+        label = config_label(c["params"])
+        new = {"size": size, "scene_hash": c["scene_hash"], "config": label, "params": c["params"],
+               "metrics": {img: {m: {"value": v["value"], "noise_floor": v["noise_floor"]} for m, v in ms.items()}
+                           for img, ms in c["metrics"].items()},
+               "git_commit": commit or git_commit(), "updated": now}
+        entries = changed[name]
+        old = find_entry(entries, size, c["params"])
+        for metric in ("relmse", "si_relmse", "energy_ratio", "flip"):
+            before = old["metrics"]["subsurface"][metric]["value"] if old else None
+            table.append({"scene": name, "size": f"{size[0]}x{size[1]}", "config": label, "metric": metric,
+                          "before": before, "after": new["metrics"]["subsurface"][metric]["value"],
+                          "noise_floor": new["metrics"]["subsurface"][metric]["noise_floor"]})
+        if old is not None:
+            entries[entries.index(old)] = new
+        else:
+            entries.append(new)
+    if yes:
+        for name, entries in changed.items():
+            entries.sort(key=lambda e: (e["size"], e["config"]))
+            with atomic_write(baseline_path(name)) as tmp:
+                tmp.write_text(json.dumps({"scene": name, "entries": entries}, indent=1, sort_keys=True) + "\n")
+    return {"written": sorted(str(baseline_path(n)) for n in changed) if yes else [], "changes": table}
+
+
+def format_changes(changes):
+    from io import StringIO
+
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="baseline update (subsurface image)")
+    for col in ("scene", "size", "config", "metric", "before", "after", "noise floor"):
+        t.add_column(col, justify="right" if col in ("before", "after", "noise floor") else "left")
+    for r in changes:
+        t.add_row(r["scene"], r["size"], r["config"], r["metric"],
+                  "new" if r["before"] is None else f"{r['before']:.5g}", f"{r['after']:.5g}",
+                  f"{r['noise_floor']:.3g}")
+    buf = StringIO()
+    Console(file=buf, width=140).print(t)
+    return buf.getvalue()
+
+
+# --------------------------------------------------------------------------- references
+
+def reference_agreement(old, new, significance=SIGNIFICANCE):
+    """Per-pixel two-sided z-test of two independent reference estimates.
+
+    ``z = (a - b) / sqrt(se_a^2 + se_b^2)`` for every pixel and channel with a
+    non-zero standard error; the images disagree when the smallest p-value is
+    below ``significance / n`` (Bonferroni over the ``n`` tests). Pixels where
+    both estimates have zero error must be equal. Returns a dict with the
+    decision and its figures.
+    """
+    a, b = old["rgb"].astype(np.float64), new["rgb"].astype(np.float64)
+    se = np.sqrt(old["se"].astype(np.float64) ** 2 + new["se"].astype(np.float64) ** 2)
+    tested = se > 0
+    n = int(tested.sum())
+    z = np.abs(a - b)[tested] / se[tested]
+    z_max = float(z.max()) if n else 0.0
+    p_min = math.erfc(z_max / math.sqrt(2)) if n else 1.0
+    exact_mismatch = int(np.count_nonzero((~tested) & (a != b)))
+    ok = (p_min >= significance / max(n, 1)) and exact_mismatch == 0
+    return {"agree": bool(ok), "tests": n, "z_max": z_max, "p_min": p_min, "alpha": significance,
+            "threshold_p": significance / max(n, 1), "untested_mismatches": exact_mismatch}
+
+
+def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
+    """Render the small reference again with new seeds; keep it only if it agrees with the old one.
+
+    ``into`` writes the new reference to another folder instead of replacing the
+    committed one (the accuracy meta-tests keep such re-seeded references).
+    """
+    from .imageio import read_exr
+    from .reference.render import render_reference
+
+    scene = load_scene(scene_name).with_resolution(*SMALL_SIZE)
+    dest = REF_DIR / scene_name
+    old_meta = dest / "reference.json"
+    old_info = json.loads(old_meta.read_text()) if old_meta.is_file() else None
+    old_seeds = (old_info or {}).get("seeds") or [0]
+    base_seed = seed_offset if seed_offset is not None else int(max(old_seeds)) + 1000
+    target = target or scene.tolerances.get("small_reference_rel_se")
+    kwargs = {"target_rel_se": float(target)} if target else {}
+    tmp_root = REPO / "cache" / "regenerate"
+    tmp_root.mkdir(parents=True, exist_ok=True)
+    out = tmp_root / scene_name
+    if out.exists():
+        shutil.rmtree(out)
+    render_reference(scene, out, seed_base=base_seed, **kwargs)
+    result = {"scene": scene_name, "dest": str(dest), "base_seed": base_seed}
+    if old_info is not None and old_info.get("content_hash") == scene.content_hash:
+        checks = {}
+        for part in ("subsurface", "full"):
+            checks[part] = reference_agreement(read_exr(dest / f"{part}.exr"), read_exr(out / f"{part}.exr"))
+        result["check"] = checks
+        if not all(c["agree"] for c in checks.values()):
+            worst = max(checks.items(), key=lambda kv: kv[1]["z_max"])
+            raise InputError(dest, f"{worst[0]}.exr", f"the new reference disagrees with the committed one "
+                             f"(max |z| = {worst[1]['z_max']:.2f}, p = {worst[1]['p_min']:.2e} < "
+                             f"{worst[1]['threshold_p']:.2e} after Bonferroni over {worst[1]['tests']} pixels)",
+                             f"nothing was replaced; new render kept in {out} for inspection")
+        result["status"] = "replaced (agrees with the old reference)"
+    else:
+        result["status"] = "new (no reference for this scene version to check against)"
+    target_dir = Path(into) if into else dest
+    result["written"] = str(target_dir)
+    with atomic_dir(target_dir) as tmp:
+        for f in out.iterdir():
+            shutil.copy2(f, tmp / f.name)
+    shutil.rmtree(out, ignore_errors=True)
+    return result
+
+
+# --------------------------------------------------------------------------- CLI
+
+def run_baselines_cli(args):
+    if args.action == "update":
+        res = update(args.store, scene=args.scene, yes=True)
+        if not args.json:
+            print(format_changes(res["changes"]))
+        return res
+    if args.action == "show":
+        names = [args.scene] if args.scene else [p.stem for p in sorted(BASELINE_DIR.glob("*.json"))]
+        return {n: read_baseline(n) for n in names}
+    names = [args.scene] if args.scene else list_scenes()
+    if args.into and len(names) != 1:
+        raise InputError("--into", "into", "needs exactly one --scene", "add --scene NAME")
+    return {"references": [regenerate_reference(n, into=args.into) for n in names]}

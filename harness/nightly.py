@@ -1,0 +1,196 @@
+"""``sslpv-harness nightly``: the standard matrix, judged against last night and the baselines.
+
+1. Runs the sweep declared in ``harness/nightly_matrix.toml`` (references from the cache)
+   and appends it to the store as a ``nightly`` run with the date and git commit.
+2. Judges every headline metric (:data:`harness.verdict.HEADLINE`, subsurface and full)
+   against the previous night and against the committed baselines: a regression is a
+   change beyond the combined noise floors plus the matrix's tolerance.
+3. Writes ``reports/nightly/<date>/``: the sweep report (``report/``), trend plots of each
+   headline metric over past nights per scene and configuration, the verdict with every
+   regression and improvement; and ``reports/nightly/index.html``, the nights newest first.
+4. Exits non-zero (1) on a regression.
+"""
+
+import json
+import tomllib
+from datetime import date as _date
+from pathlib import Path
+
+from .atomic import atomic_dir, atomic_write
+from .errors import InputError
+from .params_cli import CLI_TO_FIELD, config_label, parse_lists
+from .scene import list_scenes, load_scene
+from .verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
+
+TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
+
+
+def load_matrix(path):
+    """Read and validate the standard matrix file."""
+    from .sweep import parse_size, resolve_scenes
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file", "does not exist", "give the nightly matrix file (harness/nightly_matrix.toml)")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(path, "toml", f"is not valid TOML ({exc})", "fix the syntax") from exc
+    scenes = data.get("scenes", "all")
+    scenes = list_scenes() if scenes == "all" else resolve_scenes(scenes)
+    raw = data.get("params", {})
+    unknown = set(raw) - set(CLI_TO_FIELD)
+    if unknown:
+        raise InputError(path, f"params.{sorted(unknown)[0]}", "is not a renderer parameter",
+                         f"use: {', '.join(CLI_TO_FIELD)}")
+    for k, v in raw.items():
+        if not isinstance(v, list) or not v:
+            raise InputError(path, f"params.{k}", "must be a non-empty list", f"write e.g. {k} = [8, 16]")
+    params = parse_lists(raw)
+    size = data.get("size")
+    size = parse_size(f"{size[0]}x{size[1]}") if size else None
+    tol = dict(DEFAULT_TOLERANCE, **data.get("tolerance", {}))
+    return {"scenes": scenes, "params": params, "size": size, "tolerance": tol, "path": str(path)}
+
+
+def rows_for_run(store, run_id):
+    """Headline metric rows of one run, keyed by scene and configuration label."""
+    rows = []
+    for c in store.configs(run_id=run_id):
+        if c["status"] != "ok":
+            continue
+        label = config_label(c["params"])
+        for image, ms in c["metrics"].items():
+            for metric, m in ms.items():
+                rows.append({"scene": c["scene"], "config": label, "image": image, "metric": metric,
+                             "value": m["value"], "noise_floor": m["noise_floor"]})
+    return rows
+
+
+def baseline_rows(scenes, size):
+    """Committed baseline rows at the nightly's image size (scenes without any are skipped)."""
+    from .baselines import read_baseline
+
+    rows = []
+    for name in scenes:
+        scene = load_scene(name)
+        want = list(size) if size else [scene.camera.width, scene.camera.height]
+        for e in read_baseline(name):
+            if list(e["size"]) != want:
+                continue
+            for image, ms in e["metrics"].items():
+                for metric, m in ms.items():
+                    rows.append({"scene": name, "config": e["config"], "image": image, "metric": metric,
+                                 "value": m["value"], "noise_floor": m["noise_floor"]})
+    return rows
+
+
+def trend_plots(store, night_run_ids, out_dir):
+    """One figure per scene and headline metric: the subsurface value over nights, a line per configuration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = {}
+    for rid, date in night_run_ids:
+        for r in rows_for_run(store, rid):
+            if r["image"] == "subsurface" and r["metric"] in HEADLINE:
+                series.setdefault((r["scene"], r["metric"]), {}).setdefault(r["config"], []).append(
+                    (date, r["value"], r["noise_floor"]))
+    out = []
+    for (scene, metric), by_config in sorted(series.items()):
+        fig, ax = plt.subplots(figsize=(7, 3.6))
+        for label, pts in sorted(by_config.items()):
+            xs = [p[0] for p in pts]
+            ys = [p[1] for p in pts]
+            ax.plot(xs, ys, marker="o", ms=3, lw=1, label=label)
+        ax.set_title(f"{scene}: {metric} (subsurface) per night")
+        ax.set_xlabel("night")
+        ax.set_ylabel(metric)
+        ax.tick_params(axis="x", labelrotation=30, labelsize=7)
+        if len(by_config) <= 24:
+            ax.legend(fontsize=5, ncol=3, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+        fig.tight_layout()
+        name = f"trend_{scene}_{metric}.png"
+        fig.savefig(out_dir / name, dpi=90)
+        plt.close(fig)
+        out.append({"scene": scene, "metric": metric, "file": name})
+    return out
+
+
+def _render(template, **ctx):
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES), autoescape=True,
+                             undefined=jinja2.StrictUndefined)
+    return env.get_template(template).render(**ctx)
+
+
+def write_index(out_root):
+    """``index.html``: every night, newest first, with its verdict."""
+    nights = []
+    for meta in sorted(Path(out_root).glob("*/night.json"), reverse=True):
+        info = json.loads(meta.read_text())
+        nights.append(info)
+    with atomic_write(Path(out_root) / "index.html") as tmp:
+        tmp.write_text(_render("index.html.j2", nights=nights))
+    return Path(out_root) / "index.html"
+
+
+def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True):
+    from .report.build import build_report
+    from .store import Store
+    from .sweep import SweepConfig, run_sweep
+
+    matrix = load_matrix(matrix_path)
+    night = night or _date.today().isoformat()
+    try:
+        _date.fromisoformat(night)
+    except ValueError:
+        raise InputError("--date", "date", f"{night!r} is not YYYY-MM-DD", "write e.g. 2026-11-22") from None
+    out_root = Path(out_root)
+    cfg = SweepConfig(scenes=matrix["scenes"], params=matrix["params"], out=str(out_root / "runs" / night),
+                      store=str(store_path), size=matrix["size"], kind="nightly")
+    summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress)
+    run_id = summary["run_id"]
+    tol = matrix["tolerance"]
+    with Store(store_path) as st:
+        now_rows = rows_for_run(st, run_id)
+        nights = [(r["id"], (r.get("config") or {}).get("out", "").rsplit("/", 1)[-1] or r["date"])
+                  for r in st.runs(kind="nightly") if r["status"] == "finished"]
+        earlier = [(rid, d) for rid, d in nights if d < night]
+        prev = earlier[-1] if earlier else None
+        prev_rows = rows_for_run(st, prev[0]) if prev else []
+        changes = compare_rows(prev_rows, now_rows, tol, "previous-night")
+        base = baseline_rows(matrix["scenes"], matrix["size"])
+        changes += compare_rows(base, now_rows, tol, "baseline")
+        verdict = overall(changes)
+        night_dir = out_root / night
+        with atomic_dir(night_dir) as tmp:
+            build_report(store_path, tmp / "report", run_id=run_id, title=f"SSLPV nightly {night}")
+            latest = {}
+            for rid, d in nights:
+                latest[d] = rid  # a re-run of the same night replaces it in the trend
+            trends = trend_plots(st, sorted(((rid, d) for d, rid in latest.items()), key=lambda x: x[1]), tmp)
+            flagged = sorted((c for c in changes if c.verdict != "unchanged"),
+                             key=lambda c: (c.verdict != "regression", -abs(c.delta)))
+            info = {"date": night, "verdict": verdict, "run_id": run_id, "git_commit": st.run(run_id)["git_commit"],
+                    "previous_night": prev[1] if prev else None, "configurations": summary["configurations"],
+                    "failed": summary["failed"], "baseline_comparisons": sum(c.against == "baseline" for c in changes),
+                    "previous_comparisons": sum(c.against == "previous-night" for c in changes),
+                    "regressions": [c.as_dict() for c in flagged if c.verdict == "regression"],
+                    "improvements": [c.as_dict() for c in flagged if c.verdict == "improvement"],
+                    "tolerance": tol, "wall_s": summary.get("wall_s")}
+            (tmp / "night.json").write_text(json.dumps(info, indent=1))
+            (tmp / "index.html").write_text(_render("night.html.j2", info=info, trends=trends, changes=flagged))
+    index = write_index(out_root)
+    return {"verdict": verdict, "date": night, "night_dir": str(night_dir), "index": str(index),
+            "store": str(store_path), "run_id": run_id, "regressions": len(info["regressions"]),
+            "improvements": len(info["improvements"]), "configurations": summary["configurations"],
+            "failed": summary["failed"], "sweep_wall_s": summary.get("wall_s")}
+
+
+def run_nightly_cli(args):
+    return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler,
+                       progress=not args.json)

@@ -1,0 +1,21 @@
+"""``sslpv-harness report STORE_OR_RUN --out DIR``: the static HTML report of a store or a sweep folder."""
+
+from pathlib import Path
+
+from .errors import InputError
+
+
+def resolve_store(source):
+    """A store file, or a sweep folder holding ``store.sqlite``."""
+    source = Path(source)
+    if source.is_dir():
+        source = source / "store.sqlite"
+    if not source.is_file():
+        raise InputError(source, "store", "does not exist", "give a store.sqlite or the folder a sweep wrote")
+    return source
+
+
+def run_report_cli(args):
+    from .report.build import build_report
+
+    return build_report(resolve_store(args.source), args.out, run_id=args.run, cost_budget_ms=args.budget_ms)
