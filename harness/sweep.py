@@ -17,7 +17,11 @@ The client renders (or fetches) references, scatters them to the workers, and is
 the only writer of files and of the store. Each finished configuration is
 committed to the store at once, so Ctrl-C, a killed worker (Dask re-runs its
 task elsewhere) or a crash loses nothing; running the same command again skips
-every configuration already recorded as ``ok`` and retries failed ones.
+every configuration already recorded as ``ok`` and retries failed ones. A run is
+``finished`` only when every configuration is ``ok`` (else ``incomplete``,
+``interrupted``, or still ``running`` after a crash); running the same sweep again
+continues such a run, while re-running a finished sweep from its ``sweep.json``
+makes a new run (a reproduction).
 """
 
 import dataclasses
@@ -205,7 +209,10 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
                 if client is None:
                     client, cluster = make_client(None, workers)
                 _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, progress)
-            store.finish_run(run_id, "finished", gl_renderer=summary["gl_renderer"])
+            # A run with failed configurations stays open: the same command retries them.
+            status = "finished" if summary["failed"] == 0 else "incomplete"
+            store.finish_run(run_id, status, gl_renderer=summary["gl_renderer"])
+            summary["status"] = status
     finally:
         if client is not None:
             client.close()

@@ -1,0 +1,152 @@
+"""Baselines and small references: validation errors, the update command, and the
+statistical check that guards a regenerated reference."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from harness import baselines
+from harness.cli import main
+from harness.errors import InputError
+
+
+@pytest.fixture()
+def sandbox(tmp_path, monkeypatch):
+    """A copy of the committed baselines that a test may change."""
+    root = tmp_path / "baselines"
+    shutil.copytree(baselines.BASELINE_DIR, root)
+    monkeypatch.setattr(baselines, "BASELINE_DIR", root)
+    monkeypatch.setattr(baselines, "REF_DIR", root / "refs")
+    monkeypatch.setattr(baselines, "MATRIX_FILE", root / "accuracy_matrix.toml")
+    return root
+
+
+class TestValidation:
+    def test_committed_baselines_are_valid(self):
+        entries = baselines.all_baselines()
+        assert len(entries) >= 8 and all(len(e) >= 4 for e in entries.values())
+
+    def test_baseline_for_a_scene_that_no_longer_exists(self, sandbox):
+        shutil.copy(sandbox / "thin_ring.json", sandbox / "gone_scene.json")
+        data = json.loads((sandbox / "gone_scene.json").read_text())
+        data["scene"] = "gone_scene"
+        (sandbox / "gone_scene.json").write_text(json.dumps(data))
+        with pytest.raises(InputError, match=r"gone_scene\.json: scene: scene 'gone_scene' no longer exists.*delete"):
+            baselines.all_baselines()
+
+    def test_baseline_from_a_different_scene_hash(self, sandbox):
+        path = sandbox / "thin_ring.json"
+        data = json.loads(path.read_text())
+        data["entries"][0]["scene_hash"] = "0" * 64
+        path.write_text(json.dumps(data))
+        with pytest.raises(InputError, match=r"thin_ring\.json: .*scene_hash: baseline was made for scene hash "
+                                             r"000000000000 but the scene now hashes to"):
+            baselines.read_baseline("thin_ring")
+
+    def test_missing_reference(self, sandbox):
+        shutil.rmtree(sandbox / "refs" / "thin_ring")
+        from harness.accuracy import small_scene
+
+        with pytest.raises(InputError, match=r"refs/thin_ring: reference: is missing; run `sslpv-harness baselines "
+                                             r"regenerate-references --scene thin_ring`"):
+            baselines.committed_reference(small_scene("thin_ring"))
+
+    def test_update_with_no_store(self, capsys):
+        assert main(["baselines", "update"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--store: store: no results store given" in err[0]
+
+    def test_update_with_missing_store(self, tmp_path, capsys):
+        assert main(["baselines", "update", "--store", str(tmp_path / "nope.sqlite")]) == 2
+        assert "no results store at" in capsys.readouterr().err
+
+
+class TestUpdate:
+    def test_update_shows_before_after_and_changes_only_that_entry(self, sandbox, tmp_path):
+        from harness.accuracy import small_scene
+        from harness.store import Store
+        from sslpv_gl.params import SSLPVParams
+
+        scene = small_scene("thin_ring")
+        params = SSLPVParams(N=16, steps=8).as_dict()
+        before_files = {p.name: p.read_text() for p in sandbox.glob("*.json")}
+        old = baselines.find_entry(baselines.read_baseline("thin_ring"), [64, 64], params)
+        rows = [{"image": img, "metric": m, "value": v["value"] * 1.5, "noise_floor": v["noise_floor"],
+                 "per_channel": None, "params": {}}
+                for img, ms in old["metrics"].items() for m, v in ms.items()]
+        store = tmp_path / "store.sqlite"
+        with Store(store) as st:
+            rid = st.start_run("accuracy", {})
+            st.record_config(rid, "thin_ring", scene.content_hash, params, "ok", metrics=rows,
+                             reference_dir=str(sandbox / "refs" / "thin_ring"))
+        res = baselines.update(store, scene="thin_ring")
+        changed = [r for r in res["changes"] if r["metric"] == "relmse"]
+        assert len(changed) == 1
+        assert changed[0]["before"] == pytest.approx(old["metrics"]["subsurface"]["relmse"]["value"])
+        assert changed[0]["after"] == pytest.approx(1.5 * changed[0]["before"])
+        after_files = {p.name: p.read_text() for p in sandbox.glob("*.json")}
+        assert {k for k in before_files if before_files[k] != after_files[k]} == {"thin_ring.json"}
+        new_entries = baselines.read_baseline("thin_ring")
+        assert len(new_entries) == len(json.loads(before_files["thin_ring.json"])["entries"])
+        others = [e for e in new_entries if e["params"] != params]
+        assert all(e in json.loads(before_files["thin_ring.json"])["entries"] for e in others)
+        assert "before" in baselines.format_changes(res["changes"])
+
+
+class TestReferenceAgreement:
+    def images(self, rng, sigma, shift=0.0):
+        truth = rng.uniform(0.2, 1.0, size=(64, 64, 3))
+        se = np.full_like(truth, sigma)
+        a = {"rgb": truth + rng.normal(0, sigma, truth.shape), "se": se}
+        b = {"rgb": truth + shift + rng.normal(0, sigma, truth.shape), "se": se}
+        return a, b
+
+    def test_independent_estimates_agree(self):
+        rng = np.random.default_rng(1)
+        rejections = sum(not baselines.reference_agreement(*self.images(rng, 0.02))["agree"] for _ in range(50))
+        # Bonferroni at 1% family-wise: expect ~0.5 of 50; 3 or more would mean a broken test statistic.
+        assert rejections <= 2
+
+    def test_a_biased_pixel_is_caught(self):
+        rng = np.random.default_rng(2)
+        a, b = self.images(rng, 0.02)
+        b["rgb"][10, 10, 0] += 0.02 * 8 * np.sqrt(2)  # 8 standard deviations of the difference
+        res = baselines.reference_agreement(a, b)
+        assert not res["agree"] and res["t_max"] > 7
+
+    def test_estimated_errors_use_students_t(self):
+        """With SEs estimated from K = 8 seeds, |t| = 5.9 is not significant over 12288 tests; with known
+        errors (a z-test) it would be."""
+        a = {"rgb": np.zeros((64, 64, 3)), "se": np.full((64, 64, 3), 0.1)}
+        b = {"rgb": np.zeros((64, 64, 3)), "se": np.full((64, 64, 3), 0.1)}
+        b["rgb"][5, 5, 0] = 5.9 * np.sqrt(0.02)
+        assert baselines.reference_agreement(a, b, k_old=8, k_new=8)["agree"]
+        assert not baselines.reference_agreement(a, b)["agree"]
+
+    def test_a_global_bias_is_caught(self):
+        res = baselines.reference_agreement(*self.images(np.random.default_rng(3), 0.02, shift=0.05))
+        assert not res["agree"]
+
+    def test_regenerate_refuses_a_disagreeing_reference(self, sandbox, monkeypatch):
+        from harness.imageio import read_exr, write_exr
+        from harness.reference import render as ref_render
+
+        dest = sandbox / "refs" / "thin_ring"
+        before = {p.name: p.read_bytes() for p in dest.iterdir()}
+
+        def biased_render(scene, out, **kw):
+            out.mkdir(parents=True, exist_ok=True)
+            for f in dest.iterdir():
+                shutil.copy(f, out / f.name)
+            for part in ("subsurface", "full"):
+                d = read_exr(dest / f"{part}.exr")
+                write_exr(out / f"{part}.exr", d["rgb"] * 1.3 + 0.05, se=d["se"])
+            return {}
+
+        monkeypatch.setattr(ref_render, "render_reference", biased_render)
+        monkeypatch.setattr(baselines, "REPO", sandbox.parent)
+        with pytest.raises(InputError, match=r"disagrees with the committed one .*nothing was replaced"):
+            baselines.regenerate_reference("thin_ring")
+        assert {p.name: p.read_bytes() for p in dest.iterdir()} == before

@@ -1,0 +1,141 @@
+"""The sweep on Dask distributed: a 2-worker LocalCluster, resuming, failures, bad input.
+
+References come from the committed 64x64 ones (``baselines/refs``); nothing is
+rendered with Mitsuba here.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from harness.cli import main
+from harness.errors import InputError
+from harness.store import Store
+from harness.sweep import SweepConfig, run_sweep
+
+pytestmark = [pytest.mark.gl, pytest.mark.slow]
+REPO = Path(__file__).resolve().parent.parent
+SCENES = ["thin_ring", "absorbing_sphere"]
+PARAMS = {"N": [8, 16], "steps": [4, 8]}
+
+
+def small_sweep(out, **kw):
+    cfg = SweepConfig(scenes=SCENES, params=dict(PARAMS), out=str(out), size=[64, 64])
+    return run_sweep(cfg, workers=2, progress=False, **kw)
+
+
+def test_two_worker_sweep_stores_everything_and_reruns_from_its_config(tmp_path):
+    summary = small_sweep(tmp_path / "s")
+    assert summary["configurations"] == 8 and summary["ok"] == 8 and summary["failed"] == 0
+    assert summary["gl_renderer"]
+    with Store(summary["store"]) as st:
+        configs = st.configs(run_id=summary["run_id"])
+        run = st.run(summary["run_id"])
+    assert len(configs) == 8 and run["status"] == "finished" and run["gl_renderer"]
+    for c in configs:
+        assert set(c["metrics"]) == {"subsurface", "full"}
+        assert {"relmse", "energy_ratio", "flip", "si_relmse", "ciede2000_p95"} <= set(c["metrics"]["subsurface"])
+        for m in c["metrics"]["subsurface"].values():
+            assert m["noise_floor"] is not None
+        assert {"rsm", "injection", "propagation", "shading"} <= set(c["timings"])
+        assert (Path(c["render_dir"]) / "subsurface.exr").is_file()
+    # The configuration it wrote reproduces the sweep as a new run with identical values.
+    again = main(["sweep", "--config", str(tmp_path / "s" / "sweep.json"), "--json"])
+    assert again == 0
+    with Store(summary["store"]) as st:
+        runs = st.runs()
+        assert len(runs) == 2 and runs[1]["config"] == runs[0]["config"]
+        first = {c["config_key"]: c["metrics"] for c in st.configs(run_id=runs[0]["id"])}
+        second = {c["config_key"]: c["metrics"] for c in st.configs(run_id=runs[1]["id"])}
+    assert first == second
+
+
+def test_failed_configuration_is_recorded_and_retried_on_resume(tmp_path, monkeypatch):
+    monkeypatch.setenv("SSLPV_SWEEP_FAIL_CONFIG", "N16-K8-collision")
+    first = small_sweep(tmp_path / "s")
+    assert first["ok"] == 6 and first["failed"] == 2
+    with Store(first["store"]) as st:
+        failed = [c for c in st.configs() if c["status"] == "failed"]
+    assert len(failed) == 2 and all("injected" in c["error"] for c in failed)
+    monkeypatch.delenv("SSLPV_SWEEP_FAIL_CONFIG")
+    second = small_sweep(tmp_path / "s")
+    assert second["run_id"] == first["run_id"] and second["skipped_done"] == 6 and second["ok"] == 2
+    with Store(first["store"]) as st:
+        assert sorted(c["status"] for c in st.configs()) == ["ok"] * 8
+
+
+def test_killed_sweep_resumes_without_redoing_or_losing(tmp_path):
+    out = tmp_path / "s"
+    cmd = [sys.executable, "-m", "harness.cli", "sweep", "--scenes", ",".join(SCENES), "--grid", "8,16",
+           "--steps", "4,8,16", "--size", "64x64", "--workers", "2", "--out", str(out), "--no-progress", "--json"]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    store = out / "store.sqlite"
+    deadline = time.time() + 120
+    done = 0
+    while time.time() < deadline and done < 2:
+        time.sleep(0.5)
+        if store.exists():
+            with Store(store) as st:
+                done = len(st.done_keys(st.runs()[-1]["id"])) if st.runs() else 0
+    assert done >= 2, "the sweep recorded nothing within 120 s"
+    os.killpg(proc.pid, signal.SIGKILL)  # a crash: no chance to clean up
+    proc.wait()
+    with Store(store) as st:
+        before = st.done_keys(st.runs()[-1]["id"])
+    if len(before) == 12:
+        pytest.skip("the sweep finished before it could be killed")
+    rerun = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    summary = json.loads(rerun.stdout)
+    assert summary["skipped_done"] == len(before)
+    assert summary["ok"] == 12 - len(before)
+    with Store(store) as st:
+        keys = [c["config_key"] for c in st.configs()]
+    assert len(keys) == 12 and len(set(keys)) == 12
+
+
+class TestBadInput:
+    def run_cli(self, tmp_path, *extra):
+        code = subprocess.run([sys.executable, "-m", "harness.cli", "sweep", "--out", str(tmp_path / "o"),
+                               "--no-progress", *extra], cwd=REPO, capture_output=True, text=True, timeout=120)
+        lines = code.stderr.strip().splitlines()
+        return code.returncode, lines
+
+    @pytest.mark.parametrize("args,pattern", [
+        (["--scenes", "no_such_scene"], "unknown scene 'no_such_scene'"),
+        (["--scenes", "thin_ring,"], "empty scene name"),
+        (["--scenes", "thin_ring", "--grid", "16,,32"], "empty value"),
+        (["--scenes", "thin_ring", "--grid", "sixteen"], "not an integer"),
+        (["--scenes", "thin_ring", "--mapping", "magic"], "unknown mapping 'magic'"),
+        (["--scenes", "thin_ring", "--grid", "1000"], "N: must be an integer in"),
+        (["--scenes", "thin_ring", "--size", "64"], "not WIDTHxHEIGHT"),
+        (["--scenes", "thin_ring", "--size", "64x64", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach Dask scheduler"),
+    ])
+    def test_one_line_and_nothing_written(self, tmp_path, args, pattern):
+        code, lines = self.run_cli(tmp_path, *args)
+        assert code == 2, lines
+        assert len(lines) == 1 and pattern in lines[0], lines
+        assert not (tmp_path / "o" / "store.sqlite").exists()
+
+    def test_reference_with_nan_is_refused_before_the_store(self, tmp_path, monkeypatch):
+        import numpy as np
+
+        from harness import sweep
+        from harness.imageio import write_exr
+
+        ref = tmp_path / "ref"
+        ref.mkdir()
+        img = np.ones((64, 64, 3), np.float32)
+        img[3, 4, 1] = np.nan
+        for name in ("subsurface", "full", "half_a", "half_b"):
+            write_exr(ref / f"{name}.exr", img, se=np.zeros_like(img), extra={"mask": np.ones((64, 64))})
+        monkeypatch.setattr(sweep, "reference_dir", lambda scene, target=None: ref)
+        with pytest.raises(InputError, match=r"subsurface\.exr: rgb: contains 1 NaN"):
+            small_sweep(tmp_path / "s")
+        assert not (tmp_path / "s" / "store.sqlite").exists()
