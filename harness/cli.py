@@ -89,6 +89,15 @@ def cmd_report(args):
     _emit(args, run_report_cli(args))
 
 
+def cmd_export(args):
+    from .report_cmd import resolve_store
+    from .store import Store
+
+    with Store(resolve_store(args.source)) as st:
+        rows = st.export(args.out, run_id=args.run, scene=args.scene)
+    _emit(args, {"store": str(args.source), "out": str(args.out), "rows": rows})
+
+
 def cmd_nightly(args):
     from .nightly import run_nightly_cli
 
@@ -152,6 +161,12 @@ def build_parser():
     sp.add_argument("--run", type=int, help="run id (default: the latest)")
     sp.add_argument("--budget-ms", type=float, help="SSLPV cost budget for the summary (default: median cost)")
 
+    sp = add("export", cmd_export, "export a store's results to CSV (or Parquet, with pyarrow) for analysis")
+    sp.add_argument("source", type=Path, help="store.sqlite or a sweep folder")
+    sp.add_argument("--out", type=Path, required=True, help="output file: .csv or .parquet")
+    sp.add_argument("--run", type=int, help="only this run id")
+    sp.add_argument("--scene", help="only this scene")
+
     sp = add("nightly", cmd_nightly, "run the standard matrix, append to the store, write the nightly report")
     sp.add_argument("--matrix", type=Path, default=REPO / "harness" / "nightly_matrix.toml",
                     help="the standard matrix file")
@@ -183,6 +198,7 @@ def _add_sslpv_args(sp, multi):
     sp.add_argument("--precision", help=f"{kind}grid precision: fp32 | fp16")
     sp.add_argument("--rsm-size", dest="rsm_size", help=f"{kind}shadow-map resolution")
     sp.add_argument("--inject-size", dest="inject_size", help=f"{kind}injection RSM resolution")
+    sp.add_argument("--eta2", help=f"{kind}true: divide outgoing radiance by eta^2 (not in the paper's Eq. 4)")
 
 
 def main(argv=None):

@@ -15,7 +15,7 @@ from .errors import InputError
 CLI_TO_FIELD = {
     "grid": "N", "steps": "steps", "mapping": "mapping", "resample": "resample", "outside": "outside",
     "lookup": "lookup", "skip": "skip", "inject_offset": "inject_offset", "precision": "precision",
-    "rsm_size": "rsm_size", "inject_size": "inject_size",
+    "rsm_size": "rsm_size", "inject_size": "inject_size", "eta2": "eta2",
 }
 FIELD_TO_CLI = {v: k for k, v in CLI_TO_FIELD.items()}
 
@@ -28,6 +28,12 @@ def _field_types():
 
 def _convert(cli_name, text, type_name):
     flag = "--" + cli_name.replace("_", "-")
+    if type_name in ("bool", bool):
+        if text.lower() in ("true", "1", "yes", "on"):
+            return True
+        if text.lower() in ("false", "0", "no", "off"):
+            return False
+        raise InputError(flag, cli_name, f"{text!r} is not true or false", "write true or false")
     try:
         if type_name in ("int", int):
             return int(text)

@@ -42,6 +42,8 @@ class SSLPVParams:
     inject_size: int = _p(256, "injection RSM resolution per light (paper: 256^2 texels used for injection)")
     inject_offset: float = _p(0.0, "move injected point lights this far inwards along -n (scene units; 0 = paper)")
     precision: str = _p("fp32", "storage of the SH grids: fp32 or fp16 (paper: 16-bit floats)")
+    eta2: bool = _p(False, "divide outgoing radiance by eta^2 (radiance compression leaving a medium of index "
+                           "eta; not in the paper's Eq. 4)")
 
     def __post_init__(self):
         def bad(name, problem, fix):
@@ -71,6 +73,11 @@ class SSLPVParams:
         off = self.inject_offset
         if isinstance(off, bool) or not isinstance(off, (int, float)) or not off == off or abs(off) == float("inf"):
             bad("inject_offset", f"must be a finite number, got {off!r}", "change the value")
+        if not isinstance(self.eta2, bool):
+            bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")
+        if self.skip > self.steps:
+            bad("skip", f"skip {self.skip} must not exceed steps {self.steps} (nothing would be accumulated)",
+                "lower --skip")
 
     @staticmethod
     def doc(name):

@@ -29,8 +29,9 @@ paper's four stages on an OpenGL 4.3 context (headless EGL; llvmpipe works):
    * - shading
      - Sec. 3.3, Eqs. 4-7
      - ``shade.vert/frag``
-     - area-light radiance from the accumulation grid, plus GGX reflection
-       of each light (shadow-mapped) for a dielectric boundary
+     - area-light radiance from the accumulation grid (times ``1/eta^2``
+       with ``params.eta2``; not in the paper), plus GGX reflection of each
+       light (shadow-mapped) for a dielectric boundary
 
 Parameters are :class:`sslpv_gl.params.SSLPVParams` (defaults in one place).
 
@@ -200,7 +201,7 @@ class SSLPVRenderer:
             prog = _sh.program(ctx, "shade.vert", "shade.frag",
                                {"LOOKUP_TRILINEAR": int(lookup == "trilinear"), "MAX_LIGHTS": MAX_LIGHTS})
             names = ["u_view_proj", "u_acc_r", "u_acc_g", "u_acc_b", "u_bbox_min", "u_bbox_size", "u_N",
-                     "u_area", "u_eta", "u_alpha", "u_cam_pos", "u_n_lights", "u_light_pos", "u_light_I",
+                     "u_area", "u_eta", "u_sub_scale", "u_alpha", "u_cam_pos", "u_n_lights", "u_light_pos", "u_light_I",
                      "u_light_vp", "u_shadow", "u_shadow_size", "u_shadow_texel"]
             if lookup == "trilinear":
                 names.remove("u_N")                     # only the cell lookup needs N
@@ -534,6 +535,7 @@ class SSLPVRenderer:
         self._set(prog, "u_N", params.N)
         self._set(prog, "u_area", dx * dx)
         self._set(prog, "u_eta", float(b.eta))
+        self._set(prog, "u_sub_scale", 1.0 / (float(b.eta) ** 2) if params.eta2 else 1.0)
         self._set(prog, "u_alpha", float(b.roughness))
         self._set(prog, "u_cam_pos", tuple(map(float, cam.origin)))
         n = len(scene.lights)

@@ -20,9 +20,10 @@ Stages
    * - ``propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None)``
      - Sec. 3.2, Eq. 3, Sec. 4
      - transfer rule of ``docs/conventions.md``; accumulate steps ``k > skip``
-   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None)``
+   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False)``
      - Sec. 3.3, Eq. 4-7
-     - ``"cell"`` or ``"trilinear"`` coefficient lookup
+     - ``"cell"`` or ``"trilinear"`` coefficient lookup; ``eta2`` adds the
+       ``1/eta^2`` radiance factor (not in the paper)
 
 Grids are ``(N, N, N, 3, 4)`` indexed ``[z, y, x, colour, coeff]`` with the
 coefficient order ``(c00, c1-1, c10, c11)``.
@@ -33,8 +34,15 @@ Limits
   and position) and sum the grids; everything after injection is linear.
 * Cubic cells are assumed for the area ``A = dx^2`` of Eq. 5 (x width used).
 * Texels whose normal faces away from the light (interpolated normals at a
-  silhouette) are refracted as light arriving from inside; for ``eta != 1``
-  their Fresnel transmittance is 0, for ``eta == 1`` they pass unchanged.
+  silhouette) are treated, here and in ``inject.vert``, as light arriving
+  from INSIDE the medium: refracted with ``1/eta`` (the lobe then points out
+  of the surface) and weighted by the Fresnel transmittance for that side,
+  which is 0 beyond the critical angle ``asin(1/eta)`` (total internal
+  reflection) but NOT in general (e.g. ``T = 0.969`` for ``eta = 1.4`` at
+  ``cos = 0.9``); for ``eta == 1`` they pass unchanged with ``T = 1``.
+* ``eta2=True`` in :func:`shade_points` divides the subsurface radiance by
+  ``eta^2`` (radiance leaving a medium of index ``eta``, as Mitsuba does);
+  the paper's Eq. 4 omits it, so the default is ``False``.
 """
 
 from __future__ import annotations
@@ -200,7 +208,7 @@ def sample_trilinear(grid, points, bbox_min, bbox_max):
 
 
 def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0,
-                 view_dirs=None):
+                 view_dirs=None, eta2=False):
     """Subsurface radiance leaving surface points (Sec. 3.3) -> (P, 3) float64.
 
     Eq. 4 with the area-light estimate of Eq. 5-7 in the two-band form of
@@ -209,7 +217,10 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
     (``view_dirs``: unit vectors from the point TOWARDS the camera); it is 1
     when ``eta == 1``, where ``view_dirs`` may be omitted. ``lookup="cell"``
     uses the coefficients of the cell containing the point, ``"trilinear"``
-    interpolates them (:func:`sample_trilinear`).
+    interpolates them (:func:`sample_trilinear`). ``eta2=True`` divides the
+    result by ``eta^2`` (radiance compression leaving a medium of index
+    ``eta``, which Mitsuba applies and the paper's Eq. 4 does not; no effect
+    when ``eta == 1``).
     """
     accum = np.asarray(accum, dtype=np.float64)
     N = accum.shape[0]
@@ -238,4 +249,6 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
         # T(w_i -> w_o) is T for light entering along -w_o from outside
         cos_o = np.clip(np.sum(v * nrm, axis=-1), 0.0, 1.0)
         T = fresnel_transmittance(cos_o, eta)
+        if eta2:
+            T = T / (float(eta) * float(eta))
     return T[:, None] * radiance

@@ -13,17 +13,6 @@ SMALL = dict(N=16, steps=8, rsm_size=256, inject_size=64)
 
 
 @pytest.fixture(scope="module")
-def renderer():
-    from sslpv_gl.context import GLContextError
-    from sslpv_gl.renderer import SSLPVRenderer
-
-    try:
-        return SSLPVRenderer()
-    except GLContextError as exc:
-        pytest.skip(str(exc))
-
-
-@pytest.fixture(scope="module")
 def scenes():
     return {name: load_scene(name).with_resolution(64, 64) for name in ("absorbing_sphere", "layered_dielectric")}
 
@@ -31,8 +20,8 @@ def scenes():
 @pytest.mark.gl
 class TestRender:
     @pytest.mark.parametrize("name", ["absorbing_sphere", "layered_dielectric"])
-    def test_end_to_end(self, renderer, scenes, name):
-        res = renderer.render(scenes[name], SSLPVParams(**SMALL))
+    def test_end_to_end(self, gl_renderer, scenes, name):
+        res = gl_renderer.render(scenes[name], SSLPVParams(**SMALL))
         for img in (res.full, res.subsurface):
             assert img.shape == (64, 64, 3) and img.dtype == np.float32
             assert np.all(np.isfinite(img))
@@ -47,56 +36,103 @@ class TestRender:
         assert res.gl_renderer
         assert res.warnings == [], res.warnings
 
-    def test_index_matched_full_is_subsurface(self, renderer, scenes):
-        res = renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL))
+    def test_index_matched_full_is_subsurface(self, gl_renderer, scenes):
+        res = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL))
         np.testing.assert_array_equal(res.full, res.subsurface)
 
-    def test_dielectric_adds_reflection(self, renderer, scenes):
-        res = renderer.render(scenes["layered_dielectric"], SSLPVParams(**SMALL))
+    def test_dielectric_adds_reflection(self, gl_renderer, scenes):
+        res = gl_renderer.render(scenes["layered_dielectric"], SSLPVParams(**SMALL))
         refl = res.full - res.subsurface
         assert refl.min() >= 0.0
         assert refl.max() > 0.0
 
-    def test_fp16_runs_and_is_close(self, renderer, scenes):
-        a = renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL))
-        b = renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL, precision="fp16"))
+    def test_fp16_runs_and_is_close(self, gl_renderer, scenes):
+        a = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL))
+        b = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL, precision="fp16"))
         assert np.all(np.isfinite(b.full))
-        assert np.abs(b.full - a.full).max() <= 1e-2 * a.full.max()
+        err = np.abs(b.full - a.full).max() / a.full.max()
+        assert err <= 5e-3, f"fp16 render off by {err:.2e} of max (measured 3.4e-3 on llvmpipe)"
 
-    def test_trilinear_lookup_runs(self, renderer, scenes):
-        res = renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL, lookup="trilinear"))
+    def test_trilinear_lookup_runs(self, gl_renderer, scenes):
+        res = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL, lookup="trilinear"))
         assert np.all(np.isfinite(res.full)) and res.full.max() > 0.0
 
-    def test_deterministic(self, renderer, scenes):
+    def test_deterministic(self, gl_renderer, scenes):
         p = SSLPVParams(**SMALL)
-        a = renderer.render(scenes["layered_dielectric"], p)
-        b = renderer.render(scenes["layered_dielectric"], p)
+        a = gl_renderer.render(scenes["layered_dielectric"], p)
+        b = gl_renderer.render(scenes["layered_dielectric"], p)
         np.testing.assert_array_equal(a.full, b.full)
 
-    def test_run_render_writes_folder(self, renderer, tmp_path):
+    def test_run_render_writes_folder(self, gl_renderer, tmp_path):
         from harness.imageio import read_exr
         from sslpv_gl.render_cmd import run_render
 
         out = tmp_path / "r"
-        info = run_render("absorbing_sphere", out, SSLPVParams(**SMALL), as_json=True, renderer=renderer)
-        assert {p.name for p in out.iterdir()} == {"full.exr", "subsurface.exr", "preview.png", "render.json"}
+        info = run_render("absorbing_sphere", out, SSLPVParams(**SMALL), as_json=True, renderer=gl_renderer)
+        # hidden files (harness.atomic's ownership marker) are not outputs
+        names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+        assert names == {"full.exr", "subsurface.exr", "preview.png", "render.json"}
         meta = json.loads((out / "render.json").read_text())
         assert meta["params"]["N"] == 16 and meta["content_hash"] == info["content_hash"]
         assert set(meta["timings_ms"]) >= {"rsm", "injection", "propagation", "shading"}
         sub = read_exr(out / "subsurface.exr")
         assert "mask" in sub and sub["mask"].shape == (meta["height"], meta["width"])
 
+    def test_eta2_index_matched_unchanged(self, gl_renderer, scenes):
+        a = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL))
+        b = gl_renderer.render(scenes["absorbing_sphere"], SSLPVParams(**SMALL, eta2=True))
+        np.testing.assert_array_equal(b.full, a.full)
+
+    def test_eta2_scales_dielectric_subsurface(self, gl_renderer, scenes):
+        scene = scenes["layered_dielectric"]
+        eta = scene.boundary.eta
+        assert eta != 1.0
+        a = gl_renderer.render(scene, SSLPVParams(**SMALL))
+        b = gl_renderer.render(scene, SSLPVParams(**SMALL, eta2=True))
+        lit = a.mask & (a.subsurface.max(axis=-1) > 1e-6 * a.subsurface.max())
+        assert lit.sum() > 100
+        # measured ratio 0.510204 = 1/1.4^2 to fp32 rounding
+        np.testing.assert_allclose(b.subsurface[lit] / a.subsurface[lit], 1.0 / eta**2, rtol=1e-5)
+        # the direct reflection is not a radiance leaving the medium: unchanged
+        np.testing.assert_allclose(b.full - b.subsurface, a.full - a.subsurface, atol=1e-6 * a.full.max())
+
+
+class TestTwinEta2:
+    def test_twin_shade_points_eta2(self):
+        from sslpv_gl import twin
+
+        rng = np.random.default_rng(3)
+        accum = np.abs(rng.normal(size=(4, 4, 4, 3, 4)))
+        pts = rng.uniform(-1, 1, (50, 3))
+        nrm = rng.normal(size=(50, 3))
+        view = nrm + 0.3 * rng.normal(size=(50, 3))
+        base = twin.shade_points(accum, -np.ones(3), np.ones(3), pts, nrm, "cell", 1.4, view)
+        scaled = twin.shade_points(accum, -np.ones(3), np.ones(3), pts, nrm, "cell", 1.4, view, eta2=True)
+        np.testing.assert_allclose(scaled, base / 1.4**2, rtol=1e-12)
+        one = twin.shade_points(accum, -np.ones(3), np.ones(3), pts, nrm, "cell", 1.0, eta2=True)
+        np.testing.assert_array_equal(one, twin.shade_points(accum, -np.ones(3), np.ones(3), pts, nrm, "cell"))
+
 
 class TestParams:
     @pytest.mark.parametrize("kwargs,needle", [
         ({"N": 0}, "N"), ({"N": 300}, "N"), ({"steps": -1}, "steps"), ({"mapping": "bogus"}, "mapping"),
         ({"lookup": "nearest"}, "lookup"), ({"precision": "fp64"}, "precision"), ({"resample": "x"}, "resample"),
+        ({"steps": 1, "skip": 2}, "--skip"), ({"eta2": 1}, "eta2"),
     ])
     def test_bad_values_one_line(self, kwargs, needle):
         with pytest.raises(InputError) as err:
             SSLPVParams(**kwargs)
         msg = str(err.value)
         assert "\n" not in msg and needle in msg
+
+    def test_skip_above_steps(self):
+        with pytest.raises(InputError) as err:
+            SSLPVParams(steps=1, skip=2)
+        msg = str(err.value)
+        assert "skip 2 must not exceed steps 1 (nothing would be accumulated)" in msg
+        assert "lower --skip" in msg and "\n" not in msg
+        SSLPVParams(steps=2, skip=2)                  # equal is allowed (empty accumulation)
+        SSLPVParams(steps=0, skip=0)
 
     def test_unknown_choice_lists_allowed(self):
         with pytest.raises(InputError, match="literal") as err:
