@@ -143,7 +143,9 @@ def _write_artifacts(root, scene, params, res, ref, rows):
     with Store(store_path) as st:
         rid = st.start_run("accuracy", {"scene": scene.name, "params": params.as_dict()})
         st.record_config(rid, scene.name, scene.content_hash, params.as_dict(), "ok", metrics=rows,
-                         timings=dict(res.timings_ms), render_dir=str(out),
+                         timings={k: v for k, v in res.timings_ms.items()
+                                  if k in ("rsm", "injection", "propagation", "shading") and np.isfinite(v)},
+                         render_dir=str(out),
                          reference_dir=str(committed_reference(scene)))
         st.finish_run(rid, "finished")
     (out / "values.json").write_text(json.dumps(rows, indent=1, default=float))

@@ -314,13 +314,11 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
 def run_baselines_cli(args):
     if args.action == "update":
         res = update(args.store, scene=args.scene, yes=True)
-        if not args.json:
-            print(format_changes(res["changes"]))
-        return res
+        return res, format_changes(res["changes"])
     if args.action == "show":
         names = [args.scene] if args.scene else [p.stem for p in sorted(BASELINE_DIR.glob("*.json"))]
-        return {n: read_baseline(n) for n in names}
+        return {n: read_baseline(n) for n in names}, None
     names = [args.scene] if args.scene else list_scenes()
     if args.into and len(names) != 1:
         raise InputError("--into", "into", "needs exactly one --scene", "add --scene NAME")
-    return {"references": [regenerate_reference(n, into=args.into) for n in names]}
+    return {"references": [regenerate_reference(n, into=args.into) for n in names]}, None

@@ -109,7 +109,8 @@ def cmd_nightly(args):
 def cmd_baselines(args):
     from .baselines import run_baselines_cli
 
-    _emit(args, run_baselines_cli(args))
+    result, text = run_baselines_cli(args)
+    _emit(args, result, text)
 
 
 # --------------------------------------------------------------------------- parser

@@ -232,7 +232,9 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
 
     shared = {}
     for name, arr in arrays.items():
-        shared[name] = (client.scatter(arr, broadcast=True), sweep_worker.reference_floors(arr),
+        # Scatter the dict as ONE object: scattering a dict scatters its values under its keys
+        # ("subsurface", "mask", ...), and every scene would then overwrite the previous one's.
+        shared[name] = (client.scatter([arr], broadcast=True)[0], sweep_worker.reference_floors(arr),
                         auto_exposure(arr["subsurface"]))
     futures = {}
     for s, p, key in todo:

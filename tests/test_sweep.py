@@ -45,6 +45,23 @@ def test_two_worker_sweep_stores_everything_and_reruns_from_its_config(tmp_path)
             assert m["noise_floor"] is not None
         assert {"rsm", "injection", "propagation", "shading"} <= set(c["timings"])
         assert (Path(c["render_dir"]) / "subsurface.exr").is_file()
+    # Each configuration was measured against ITS scene's reference: the values equal an
+    # in-process render measured against that scene's committed reference.
+    from harness.accuracy import load_case_reference, small_scene
+    from harness.sweep_worker import measure
+    from sslpv_gl.params import SSLPVParams
+    from sslpv_gl.renderer import SSLPVRenderer
+
+    renderer = SSLPVRenderer()
+    for c in configs:
+        scene = small_scene(c["scene"])
+        ref, floors = load_case_reference(scene)
+        res = renderer.render(scene, SSLPVParams(**c["params"]))
+        rows = measure({"subsurface": res.subsurface, "full": res.full}, ref, floors)
+        for r in rows:
+            stored = c["metrics"][r["image"]][r["metric"]]
+            assert stored["value"] == pytest.approx(r["value"], rel=1e-6, abs=1e-9), (c["scene"], r["metric"])
+            assert stored["noise_floor"] == pytest.approx(r["noise_floor"], rel=1e-9)
     # The configuration it wrote reproduces the sweep as a new run with identical values.
     again = main(["sweep", "--config", str(tmp_path / "s" / "sweep.json"), "--json"])
     assert again == 0
