@@ -234,10 +234,19 @@ class TestOptions:
     def test_rebuild_replaces_site(self, synthetic, tmp_path):
         _, store_path, _, _ = synthetic
         out = tmp_path / "s"
-        out.mkdir()
+        build_report(store_path, out, flip_maps=False)
         (out / "stale.html").write_text("old")
         build_report(store_path, out, flip_maps=False)
         assert not (out / "stale.html").exists() and (out / "index.html").is_file()
+
+    def test_never_replaces_a_foreign_folder(self, synthetic, tmp_path):
+        _, store_path, _, _ = synthetic
+        out = tmp_path / "mine"
+        out.mkdir()
+        (out / "notes.txt").write_text("precious")
+        with pytest.raises(InputError, match="non-empty folder that the harness did not write"):
+            build_report(store_path, out, flip_maps=False)
+        assert (out / "notes.txt").read_text() == "precious"
 
     def test_missing_store_and_run(self, synthetic, tmp_path):
         _, store_path, _, _ = synthetic
