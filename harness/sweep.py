@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from dask.distributed import WorkerPlugin
 
 from .atomic import atomic_dir, atomic_write
 from .errors import InputError
@@ -140,19 +141,36 @@ def reference_dir(scene, target=None):
 
 # --------------------------------------------------------------------------- cluster
 
+class ReleaseGL(WorkerPlugin):
+    """Dask worker plugin: each worker releases its GL context when it closes."""
+
+    name = "sslpv-release-gl"
+
+    def setup(self, worker):
+        pass
+
+    def teardown(self, worker):
+        from . import sweep_worker
+
+        sweep_worker.release_renderer()
+
+
 def make_client(scheduler=None, workers=None):
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
         try:
-            return Client(scheduler, timeout="10s"), None
+            client, cluster = Client(scheduler, timeout="10s"), None
         except (OSError, TimeoutError) as exc:
             raise InputError("--scheduler", "scheduler", f"cannot reach Dask scheduler {scheduler!r} ({exc})",
                              "start it with 'dask scheduler' or drop --scheduler for a local cluster") from exc
-    n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=50)
-    return Client(cluster), cluster
+    else:
+        n = workers or os.cpu_count() or 1
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=50)
+        client = Client(cluster)
+    client.register_plugin(ReleaseGL())
+    return client, cluster
 
 
 def _write_render(render_dir, res):

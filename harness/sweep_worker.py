@@ -17,6 +17,18 @@ _RENDERER = None
 STAGES = ("rsm", "injection", "propagation", "shading")
 
 
+def release_renderer():
+    """Release this process's GL context before the interpreter shuts down.
+
+    Left to interpreter finalisation, the EGL/llvmpipe teardown can abort the
+    worker process (seen as 'killed by signal 6' when a cluster closes).
+    """
+    global _RENDERER
+    if _RENDERER is not None:
+        _RENDERER.ctx.release()
+        _RENDERER = None
+
+
 def renderer():
     global _RENDERER
     if _RENDERER is None:

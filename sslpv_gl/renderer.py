@@ -58,6 +58,7 @@ Limits
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field
@@ -80,6 +81,24 @@ LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster tha
 _FORMATS = {"fp32": ("rgba32f", "f4", np.float32), "fp16": ("rgba16f", "f2", np.float16)}
 _ACC_NONE, _ACC_FIRST, _ACC_ADD = 0, 1, 2
 _QUERY_INVALID = 0xFFFFFFFF      # what llvmpipe returns for an unavailable time query
+
+
+def _gpu_ms(query_ns, wall_ns, stage, warnings):
+    """GL time of one stage in ms.
+
+    moderngl reads GL_TIME_ELAPSED as an unsigned 32-bit value, which saturates at
+    0xFFFFFFFF ns (4.29 s; llvmpipe also answers that for a query it could not time).
+    A saturated query of a stage whose host time (between two ``finish`` calls)
+    exceeds 4.29 s is replaced by that host time, with a warning; otherwise NaN.
+    """
+    if query_ns < _QUERY_INVALID:
+        return query_ns / 1e6
+    if wall_ns >= _QUERY_INVALID:
+        warnings.append(f"GL timer query for '{stage}' saturated at 4.29 s; the host time between glFinish "
+                        "calls is reported instead")
+        return wall_ns / 1e6
+    warnings.append(f"GL timer query for '{stage}' returned no valid value ({query_ns} ns)")
+    return float("nan")
 
 
 @dataclass
@@ -110,7 +129,7 @@ class _GridSet:
         self.prop_a = [tex3(dt) for _ in range(3)]
         self.prop_b = [tex3(dt) for _ in range(3)]
         self.accum = [tex3(dt) for _ in range(3)]
-        self.material = [tex3("f4") for _ in range(2)]      # sigma_lpv, k1 = (1 - sigma_s') + sigma_s' g
+        self.material = [tex3("f4") for _ in range(2)]      # h = exp(-sigma_lpv dx / 2), h * k1 (Eq. 3)
         self.tiles_x = int(math.ceil(math.sqrt(N)))
         tiles_y = int(math.ceil(N / self.tiles_x))
         self.atlas_size = (self.tiles_x * N, tiles_y * N)
@@ -187,9 +206,9 @@ class SSLPVRenderer:
         elif kind == "propagate":
             fmt, acc = _FORMATS[key[1]][0], key[2]
             prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc})
-            samplers = ["u_src_r", "u_src_g", "u_src_b", "u_sigma", "u_k1"]
+            samplers = ["u_src_r", "u_src_g", "u_src_b", "u_half", "u_hk1"]
             images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
-            present = _sh.check_uniforms(prog, samplers + images + ["u_M", "u_dx", "u_N"],
+            present = _sh.check_uniforms(prog, samplers + images + ["u_M", "u_N"],
                                          f"propagate[{key[1]},acc={acc}]", warn)
             for unit, name in enumerate(samplers):
                 if name in present:
@@ -296,17 +315,22 @@ class SSLPVRenderer:
             med = scene.medium
             inside = grid_inside(scene.mesh, med.bbox_min, med.bbox_max, params.N)
             mat = lpv_material(med, inside, params.N, params.mapping, params.resample, params.outside)
-            self._material_cache = {key: mat}
+            # A few entries: a sweep worker interleaves mappings and step counts of one grid.
+            if len(self._material_cache) >= 8:
+                self._material_cache.pop(next(iter(self._material_cache)))
+            self._material_cache[key] = mat
         return mat
 
-    def _upload_material(self, grid, material):
-        # Eq. 3's band-1 factor depends only on the cell's material, so it is
-        # formed once here instead of per step and neighbour (one fetch fewer).
+    def _upload_material(self, grid, material, dx):
+        # Per-cell factors of the transfer rule, formed once here instead of per step
+        # and neighbour: h = exp(-sigma dx / 2), half a cell of absorption (Sec. 3.2.1),
+        # and h * k1 with Eq. 3's band-1 factor k1 = (1 - sp) + sp g of the source.
         N = grid.N
         sp = np.asarray(material["sigma_s_prime"], dtype=np.float64).reshape(N, N, N, 3)
         k1 = (1.0 - sp) + sp * np.asarray(material["g"], dtype=np.float64).reshape(N, N, N, 3)
         sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(N, N, N, 3)
-        for tex, arr in zip(grid.material, (sigma, k1)):
+        half = np.exp(-0.5 * sigma * float(dx))
+        for tex, arr in zip(grid.material, (half, half * k1)):
             a = np.zeros((N, N, N, 4), dtype=np.float32)
             a[..., :3] = arr
             tex.write(a.tobytes())
@@ -459,7 +483,6 @@ class SSLPVRenderer:
         ctx = self.ctx
         progs = {acc: self._program(("propagate", precision, acc)) for acc in (_ACC_NONE, _ACC_FIRST, _ACC_ADD)}
         for prog in progs.values():
-            self._set(prog, "u_dx", float(dx))
             self._set(prog, "u_N", grid.N)
         for unit, t in enumerate(grid.material):
             t.use(3 + unit)
@@ -487,7 +510,7 @@ class SSLPVRenderer:
         N = c0.shape[0]
         SSLPVParams(N=N, steps=int(steps), skip=int(skip), precision=precision)   # validates
         grid = self._grid(N, precision)
-        self._upload_material(grid, material)
+        self._upload_material(grid, material, dx)
         self._write_grid(grid.prop_a, c0, precision)
         final = self._propagate(grid, precision, dx, int(steps), int(skip))
         return self._read_grid(final, precision), self._read_grid(grid.accum, precision)
@@ -571,34 +594,42 @@ class SSLPVRenderer:
         views, centre, radius, w = self._views(scene)
         warnings += w
         grid = self._grid(params.N, params.precision)
-        self._upload_material(grid, material)
-        host_ms = (time.perf_counter() - t0) * 1e3
         med = scene.medium
         dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
+        self._upload_material(grid, material, dx)
+        host_ms = (time.perf_counter() - t0) * 1e3
         queries = {k: ctx.query(time=True) for k in ("rsm", "injection", "propagation", "shading")}
 
-        with queries["rsm"]:
+        stage_wall = {}
+
+        @contextlib.contextmanager
+        def stage(name):
+            # A host clock around each stage (after a finish) beside the GL timer query:
+            # moderngl reads GL_TIME_ELAPSED as 32 bits, which wraps after 4.29 s.
+            ctx.finish()
+            t = time.perf_counter_ns()
+            with queries[name]:
+                yield
+            ctx.finish()
+            stage_wall[name] = time.perf_counter_ns() - t
+
+        with stage("rsm"):
             targets, shadow_tex = self._render_rsm(scene, params, views)
-        with queries["injection"]:
+        with stage("injection"):
             size = params.inject_size
             sources = [(texs, size * size, light.position) for texs, light in zip(targets, scene.lights)]
             self._inject(grid, sources, med.bbox_min, med.bbox_max, scene.boundary.eta, params.inject_offset,
                          grid.prop_a)
-        with queries["propagation"]:
+        with stage("propagation"):
             self._propagate(grid, params.precision, dx, params.steps, params.skip)
-        with queries["shading"]:
+        with stage("shading"):
             fbo = self._shade(scene, params, grid, views, shadow_tex, centre, radius)
 
         bufs = [np.frombuffer(fbo.read(components=4, attachment=i, dtype="f4"), dtype="f4")
                 .reshape(scene.camera.height, scene.camera.width, 4)[::-1] for i in range(4)]
         timings = {}
         for k, q in queries.items():
-            ns = q.elapsed
-            if ns >= _QUERY_INVALID:
-                warnings.append(f"GL timer query for '{k}' returned no valid value ({ns} ns)")
-                timings[k] = float("nan")
-            else:
-                timings[k] = ns / 1e6
+            timings[k] = _gpu_ms(q.elapsed, stage_wall[k], k, warnings)
         timings["host_material"] = host_ms
         timings["wall"] = (time.perf_counter() - t_wall) * 1e3
         mask = bufs[1][..., 3] > 0.5

@@ -186,3 +186,29 @@ class TestContext:
         from sslpv_gl.context import GLContextError
 
         assert issubclass(GLContextError, EnvironmentProblem)
+
+
+class TestStageTimes:
+    """moderngl reads GL_TIME_ELAPSED as 32 bits; a saturated query must not be reported as 4.29 s."""
+
+    def test_valid_query_is_used(self):
+        from sslpv_gl.renderer import _gpu_ms
+
+        warnings = []
+        assert _gpu_ms(1_500_000, 2_000_000, "rsm", warnings) == 1.5 and warnings == []
+
+    def test_saturated_long_stage_falls_back_to_host_time(self):
+        from sslpv_gl.renderer import _gpu_ms
+
+        warnings = []
+        assert _gpu_ms(0xFFFFFFFF, 25_000_000_000, "propagation", warnings) == 25_000.0
+        assert len(warnings) == 1 and "saturated" in warnings[0]
+
+    def test_invalid_short_query_is_nan(self):
+        import math
+
+        from sslpv_gl.renderer import _gpu_ms
+
+        warnings = []
+        assert math.isnan(_gpu_ms(0xFFFFFFFF, 1_000_000, "rsm", warnings))
+        assert "no valid value" in warnings[0]

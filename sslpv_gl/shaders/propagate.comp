@@ -3,6 +3,9 @@
 // neighbours (conventions' transfer rule):
 //   c_d += M_s (exp(-1/2 (sigma[s] + sigma[d]) dx) S(s) c_s),
 //   S(s) = diag(1, k1, k1, k1), k1 = (1 - sp[s]) + sp[s] g[s]     (Eq. 3, SOURCE cell)
+// Absorption (Sec. 3.2.1) is separable: exp(-1/2 (sigma_s + sigma_d) dx) = h_s h_d with
+// h = exp(-1/2 sigma dx) per cell, formed once on the host. So the gather needs no exp,
+// and h_d multiplies the whole sum once.
 // ACCUMULATE: 0 = propagate only (steps <= skip), 1 = first accumulated step
 // (accum = result), 2 = later steps (accum += result). FORMAT and LOCAL are
 // #defined by the host. Image units are fixed by binding qualifiers
@@ -13,10 +16,9 @@ layout(local_size_x = LOCAL, local_size_y = LOCAL, local_size_z = LOCAL) in;
 uniform sampler3D u_src_r;      // propagation grid, previous step
 uniform sampler3D u_src_g;
 uniform sampler3D u_src_b;
-uniform sampler3D u_sigma;      // sigma_lpv rgb (per scene unit)
-uniform sampler3D u_k1;         // Eq. 3 band-1 factor (1 - sp) + sp g per cell, rgb (host, once per material)
+uniform sampler3D u_half;       // h = exp(-1/2 sigma_lpv dx) per cell, rgb: half a cell of absorption
+uniform sampler3D u_hk1;        // h * k1, k1 = (1 - sp) + sp g (Eq. 3 band-1 factor), rgb
 uniform mat4  u_M[6];           // propagation matrices, sources at +x,-x,+y,-y,+z,-z
-uniform float u_dx;             // cell width (cubic cells)
 uniform int   u_N;
 
 layout(FORMAT, binding = 0) uniform writeonly image3D u_dst_r;
@@ -36,7 +38,6 @@ void main()
     ivec3 d = ivec3(gl_GlobalInvocationID);
     if (any(greaterThanEqual(d, ivec3(u_N)))) return;
 
-    vec3 sigma_d = texelFetch(u_sigma, d, 0).rgb;
     vec4 out_r = vec4(0.0);                        // gathered coefficients per colour
     vec4 out_g = vec4(0.0);
     vec4 out_b = vec4(0.0);
@@ -45,15 +46,19 @@ void main()
         ivec3 src = d + OFFSETS[s];
         if (any(lessThan(src, ivec3(0))) || any(greaterThanEqual(src, ivec3(u_N))))
             continue;                              // outside the grid: nothing
-        vec3 k1 = texelFetch(u_k1, src, 0).rgb;    // Eq. 3 of the SOURCE cell
-        vec3 att = exp(-0.5 * (texelFetch(u_sigma, src, 0).rgb + sigma_d) * u_dx);
+        vec3 h = texelFetch(u_half, src, 0).rgb;   // source half of the absorption
+        vec3 hk = texelFetch(u_hk1, src, 0).rgb;   // ... times Eq. 3 of the SOURCE cell
         vec4 cr = texelFetch(u_src_r, src, 0);
         vec4 cg = texelFetch(u_src_g, src, 0);
         vec4 cb = texelFetch(u_src_b, src, 0);
-        out_r += u_M[s] * (att.r * vec4(cr.x, k1.r * cr.yzw));
-        out_g += u_M[s] * (att.g * vec4(cg.x, k1.g * cg.yzw));
-        out_b += u_M[s] * (att.b * vec4(cb.x, k1.b * cb.yzw));
+        out_r += u_M[s] * vec4(h.r * cr.x, hk.r * cr.yzw);
+        out_g += u_M[s] * vec4(h.g * cg.x, hk.g * cg.yzw);
+        out_b += u_M[s] * vec4(h.b * cb.x, hk.b * cb.yzw);
     }
+    vec3 h_d = texelFetch(u_half, d, 0).rgb;       // destination half of the absorption
+    out_r *= h_d.r;
+    out_g *= h_d.g;
+    out_b *= h_d.b;
 
     imageStore(u_dst_r, d, out_r);
     imageStore(u_dst_g, d, out_g);
