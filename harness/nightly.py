@@ -86,31 +86,52 @@ def baseline_rows(scenes, size):
 
 
 def trend_plots(store, night_run_ids, out_dir):
-    """One figure per scene and headline metric: the subsurface value over nights, a line per configuration."""
+    """Per scene and headline metric: the subsurface value over nights, one line per configuration.
+
+    One panel per mapping; colour is the grid resolution N, line style the step count;
+    the y axis is the metric's badness (distance from its ideal) on a log scale.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .verdict import badness
+
     series = {}
-    for rid, date in night_run_ids:
-        for r in rows_for_run(store, rid):
-            if r["image"] == "subsurface" and r["metric"] in HEADLINE:
-                series.setdefault((r["scene"], r["metric"]), {}).setdefault(r["config"], []).append(
-                    (date, r["value"], r["noise_floor"]))
+    for rid, night in night_run_ids:
+        for c in store.configs(run_id=rid):
+            if c["status"] != "ok":
+                continue
+            p = c["params"]
+            for metric in HEADLINE:
+                m = c["metrics"].get("subsurface", {}).get(metric)
+                if m is not None:
+                    key = (c["scene"], metric)
+                    line = (p.get("mapping"), p.get("N"), p.get("steps"))
+                    series.setdefault(key, {}).setdefault(line, []).append((night, badness(metric, m["value"])))
+    styles = ["-", "--", ":", "-."]
     out = []
-    for (scene, metric), by_config in sorted(series.items()):
-        fig, ax = plt.subplots(figsize=(7, 3.6))
-        for label, pts in sorted(by_config.items()):
-            xs = [p[0] for p in pts]
-            ys = [p[1] for p in pts]
-            ax.plot(xs, ys, marker="o", ms=3, lw=1, label=label)
-        ax.set_title(f"{scene}: {metric} (subsurface) per night")
-        ax.set_xlabel("night")
-        ax.set_ylabel(metric)
-        ax.tick_params(axis="x", labelrotation=30, labelsize=7)
-        if len(by_config) <= 24:
-            ax.legend(fontsize=5, ncol=3, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    for (scene, metric), lines in sorted(series.items()):
+        mappings = sorted({k[0] for k in lines})
+        grids = sorted({k[1] for k in lines})
+        steps = sorted({k[2] for k in lines})
+        fig, axes = plt.subplots(1, len(mappings), figsize=(4.2 * len(mappings) + 1.6, 3.4), squeeze=False,
+                                 sharey=True)
+        for ax, mapping in zip(axes[0], mappings):
+            for (mp, n, k), pts in sorted(lines.items()):
+                if mp != mapping:
+                    continue
+                colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
+                ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
+                        color=colour, ls=styles[steps.index(k) % len(styles)], label=f"N{n} K{k}")
+            ax.set_yscale("log")
+            ax.set_title(f"mapping={mapping}", fontsize=9)
+            ax.tick_params(axis="x", labelrotation=30, labelsize=7)
+        ideal = "|x - 1|" if metric == "energy_ratio" else "value"
+        axes[0][0].set_ylabel(f"{metric} ({ideal})")
+        axes[0][-1].legend(fontsize=6, ncol=1, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better)", fontsize=10)
         fig.tight_layout()
         name = f"trend_{scene}_{metric}.png"
         fig.savefig(out_dir / name, dpi=90)
