@@ -207,7 +207,11 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
         scenes = [s.with_resolution(*cfg.size) for s in scenes]
     client, cluster = make_client(scheduler, workers) if scheduler else (None, None)
     try:
-        refs = {s.name: reference_dir(s, cfg.reference_target) for s in scenes}
+        refs = {}
+        for s in scenes:
+            # A missing reference is rendered here, which can take minutes: say so.
+            with _status(progress, f"reference of {s.name}: from the cache, or rendering it with Mitsuba"):
+                refs[s.name] = reference_dir(s, cfg.reference_target)
         arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width)) for s in scenes}
 
         out.mkdir(parents=True, exist_ok=True)
@@ -298,6 +302,16 @@ def _resume_or_start(store, cfg, out):
         if run.get("out_dir") == str(out) and run.get("config") == cfg_json and run.get("status") != "finished":
             return run["id"]
     return store.start_run(cfg.kind, cfg_json, out_dir=str(out), git_commit=git_commit())
+
+
+def _status(enabled, text):
+    import contextlib
+
+    if not enabled:
+        return contextlib.nullcontext()
+    from rich.console import Console
+
+    return Console(stderr=True).status(text)
 
 
 class _progress:

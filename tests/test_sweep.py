@@ -156,3 +156,17 @@ class TestBadInput:
         with pytest.raises(InputError, match=r"subsurface\.exr: rgb: contains 1 NaN"):
             small_sweep(tmp_path / "s")
         assert not (tmp_path / "s" / "store.sqlite").exists()
+
+
+def test_existing_scheduler(tmp_path):
+    """--scheduler ADDRESS: the same sweep on a cluster that the sweep did not start (and must not stop)."""
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=50) as cluster:
+        cfg = SweepConfig(scenes=["thin_ring"], params={"N": [8], "steps": [4, 8]}, out=str(tmp_path / "s"),
+                          size=[64, 64])
+        summary = run_sweep(cfg, scheduler=cluster.scheduler_address, progress=False)
+        assert summary["ok"] == 2
+        with Client(cluster.scheduler_address, timeout="10s") as client:
+            assert len(client.scheduler_info()["workers"]) == 1   # still up after the sweep
