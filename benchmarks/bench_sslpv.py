@@ -18,7 +18,6 @@ import argparse
 import statistics
 import time
 
-import numpy as np
 
 PAPER = {  # Table 1, heterogeneous timings (ms), GTX 580, 1 light
     (32, 8): {"rsm": "0.18-0.45", "injection": "0.12-0.32", "propagation": "1.66-1.67", "shading": "0.14-0.81"},

@@ -22,7 +22,6 @@ Commands (``sslpv-harness baselines ...``):
 """
 
 import json
-import math
 import shutil
 import tomllib
 from datetime import datetime, timezone

@@ -191,10 +191,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
     Everything that can be wrong with the input (scenes, parameters, the scheduler,
     the reference images) is checked before the store or the output folder is touched.
     """
-    from .imageio import auto_exposure
     from .store import Store
-
-    from . import sweep_worker
 
     t0 = time.perf_counter()
     out = Path(cfg.out)

@@ -339,7 +339,7 @@ class SSLPVRenderer:
 
     def _render_rsm(self, scene, params, views):
         """Injection RSMs (one per light) and the shadow-map atlas."""
-        mgl, ctx = self._mgl, self.ctx
+        ctx = self.ctx
         prog = self._program(("rsm",))
         vao = self._mesh_vao(scene, prog, "rsm")
         ctx.disable(mgl.BLEND)
