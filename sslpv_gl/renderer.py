@@ -339,7 +339,7 @@ class SSLPVRenderer:
 
     def _render_rsm(self, scene, params, views):
         """Injection RSMs (one per light) and the shadow-map atlas."""
-        ctx = self.ctx
+        mgl, ctx = self._mgl, self.ctx
         prog = self._program(("rsm",))
         vao = self._mesh_vao(scene, prog, "rsm")
         ctx.disable(mgl.BLEND)
@@ -586,7 +586,7 @@ class SSLPVRenderer:
         if not isinstance(params, SSLPVParams):
             raise TypeError("params must be an SSLPVParams")
         self._check_scene(scene)
-        mgl, ctx = self._mgl, self.ctx
+        ctx = self.ctx
         t_wall = time.perf_counter()
         warnings = []
         t0 = time.perf_counter()
