@@ -33,6 +33,7 @@ def _check_grid(gl, ref, label):
     scale = float(np.abs(ref[..., 0]).max())
     err = float(np.abs(gl - ref).max())
     assert scale > 0.0, f"{label}: reference grid is empty"
+    print(f"{label}: max|GL - twin| / max|c00| = {err / scale:.2e} (<= {RTOL_GRID})")  # pytest -s shows it
     assert err <= RTOL_GRID * scale, f"{label}: max|GL - twin| = {err:.3e} > {RTOL_GRID} * {scale:.3e}"
 
 
@@ -47,7 +48,7 @@ def _random_material(rng, N, dx, mapping):
 
 class TestPropagate:
     @pytest.mark.parametrize("mapping", sorted(MAPPINGS))
-    @pytest.mark.parametrize("steps,skip", [(2, 2), (3, 2), (8, 2), (2, 0)])
+    @pytest.mark.parametrize("steps,skip", [(1, 0), (2, 0), (2, 2), (3, 2), (8, 2)])
     def test_random_heterogeneous(self, gl_renderer, mapping, steps, skip):
         N, dx = 8, 0.07
         rng = np.random.default_rng(1000 * steps + skip + len(mapping))
@@ -116,6 +117,7 @@ class TestInject:
         omega_p = texel_solid_angles(size, size, fov_deg, 1.0).reshape(-1)
         expect = omega_p[valid, None] * intensity[None, :]
         rel = np.abs(texels[0][valid, 6:9] / expect - 1.0).max()
+        print(f"RSM per-texel flux vs I * texel_solid_angles: max relative error {rel:.2e} (<= 1e-5)")
         assert rel <= 1e-5, f"per-texel RSM flux off by {rel:.2e} (relative) from I * texel_solid_angles"
         # total: I times the sphere's exact solid angle, to texel discretisation. Measured +2.7e-5 at
         # 64^2 texels; a cos^2 (cos^4) texel solid angle gives +1.8 % (-1.8 %), so rel=2e-3 catches both.
