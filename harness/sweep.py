@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from dask.distributed import WorkerPlugin
 
-from .atomic import atomic_dir, atomic_write
+from .atomic import atomic_write
 from .errors import InputError
 from .params_cli import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
 from .scene import list_scenes, load_scene, scene_path
@@ -174,15 +174,11 @@ def make_client(scheduler=None, workers=None):
 
 
 def _write_render(render_dir, res):
-    from .imageio import write_exr, write_png
+    from sslpv_gl.render_cmd import write_render_dir
 
-    with atomic_dir(render_dir) as tmp:
-        mask = res["mask"].astype(np.float32)
-        write_exr(tmp / "subsurface.exr", res["images"]["subsurface"], extra={"mask": mask})
-        write_exr(tmp / "full.exr", res["images"]["full"], extra={"mask": mask})
-        write_png(tmp / "preview.png", res["images"]["subsurface"], exposure=res.get("exposure", 0.0))
-        (tmp / "render.json").write_text(json.dumps({k: res[k] for k in ("params", "timings", "gl_renderer",
-                                                                         "scene", "scene_hash")}, indent=2))
+    info = {k: res[k] for k in ("params", "timings", "gl_renderer", "scene", "scene_hash")}
+    write_render_dir(render_dir, res["images"]["full"], res["images"]["subsurface"], res["mask"], info,
+                     res["images"]["subsurface"], res.get("exposure", 0.0))
 
 
 def run_sweep(cfg, scheduler=None, workers=None, progress=True):

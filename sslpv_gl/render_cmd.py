@@ -2,7 +2,7 @@
 
 Writes, atomically (the folder appears complete or not at all):
 
-* ``full.exr`` -- subsurface + direct reflection, linear RGB, top row first;
+* ``full.exr`` -- subsurface + direct reflection, linear RGB, top row first, with the ``mask`` layer;
 * ``subsurface.exr`` -- the SSLPV part, with the coverage ``mask`` as an extra layer;
 * ``preview.png`` -- the full image, auto exposure;
 * ``render.json`` -- every parameter, scene name and content hash, GL renderer,
@@ -20,7 +20,21 @@ from harness.scene import load_scene
 
 from .params import SSLPVParams
 
-__all__ = ["run_render"]
+__all__ = ["run_render", "write_render_dir"]
+
+
+def write_render_dir(out_dir, full, subsurface, mask, info, preview, exposure):
+    """Write one SSLPV render folder atomically: both EXRs (with the coverage ``mask`` layer),
+    a PNG preview of ``preview`` at ``exposure`` stops, and ``render.json`` from ``info``.
+
+    The one layout of an SSLPV render, used by ``render`` and by every sweep configuration.
+    """
+    mask = mask.astype("f4")
+    with atomic_dir(out_dir) as tmp:
+        write_exr(tmp / "full.exr", full, extra={"mask": mask})
+        write_exr(tmp / "subsurface.exr", subsurface, extra={"mask": mask})
+        write_png(tmp / "preview.png", preview, exposure)
+        (tmp / "render.json").write_text(json.dumps(info, indent=2, sort_keys=True, default=str) + "\n")
 
 
 def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, as_json=False, renderer=None):
@@ -50,10 +64,6 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
         "warnings": list(result.warnings),
         "method": "SSLPV (Borlum et al., HPG 2011), GLSL renderer sslpv_gl",
     }
-    with atomic_dir(out_dir) as tmp:
-        write_exr(tmp / "full.exr", result.full)
-        write_exr(tmp / "subsurface.exr", result.subsurface, extra={"mask": result.mask.astype("f4")})
-        write_png(tmp / "preview.png", result.full, exposure)
-        (tmp / "render.json").write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+    write_render_dir(out_dir, result.full, result.subsurface, result.mask, info, result.full, exposure)
     info["out_dir"] = str(out_dir)
     return info
