@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .baselines import SMALL_SIZE, committed_reference, find_entry, load_matrix, read_baseline
-from .params_cli import config_label, parse_lists, expand
-from .scene import load_scene
-from .verdict import HEADLINE, badness
+from harness.baselines import SMALL_SIZE, committed_reference, find_entry, load_matrix, read_baseline
+from harness.params_cli import config_label, parse_lists, expand
+from harness.scene import load_scene
+from harness.verdict import HEADLINE, badness
 
 REPO = Path(__file__).resolve().parent.parent
 ARTIFACTS = REPO / "test-artifacts" / "accuracy"
@@ -70,8 +70,8 @@ def small_scene(name):
 
 
 def load_case_reference(scene):
-    from .sweep import load_reference
-    from .sweep_worker import reference_floors
+    from harness.sweep import load_reference
+    from harness.sweep_worker import reference_floors
 
     ref = load_reference(committed_reference(scene), (scene.camera.height, scene.camera.width))
     return ref, reference_floors(ref)
@@ -80,8 +80,8 @@ def load_case_reference(scene):
 def check_case(renderer, scene_name, params, tolerance, ref=None, floors=None, artifacts=ARTIFACTS,
                write_artifacts=True):
     """Render one case and judge it against its baseline; returns a :class:`CaseResult`."""
-    from .errors import InputError
-    from .sweep_worker import measure
+    from harness.errors import InputError
+    from harness.sweep_worker import measure
 
     scene = small_scene(scene_name)
     entries = read_baseline(scene_name)
@@ -117,8 +117,8 @@ def _write_artifacts(root, scene, params, res, ref, rows):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .imageio import auto_exposure, write_exr, write_png
-    from .store import Store
+    from harness.imageio import auto_exposure, write_exr, write_png
+    from harness.store import Store
 
     out = Path(root) / scene.name / config_label(params)
     out.mkdir(parents=True, exist_ok=True)

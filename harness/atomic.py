@@ -30,7 +30,7 @@ MARKER = ".sslpv-output"
 
 
 def _check_replaceable(path):
-    from .errors import InputError
+    from harness.errors import InputError
 
     if not path.exists():
         return

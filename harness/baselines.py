@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_dir, atomic_write
-from .errors import InputError
-from .scene import list_scenes, load_scene, scene_path
+from harness.atomic import atomic_dir, atomic_write
+from harness.errors import InputError
+from harness.scene import list_scenes, load_scene, scene_path
 
 REPO = Path(__file__).resolve().parent.parent
 BASELINE_DIR = REPO / "baselines"
@@ -132,7 +132,7 @@ def find_committed_reference(scene):
 # --------------------------------------------------------------------------- update
 
 def _rows_from_store(store_path, scene=None):
-    from .store import Store
+    from harness.store import Store
 
     store_path = Path(store_path) if store_path else None
     if store_path is None or not store_path.is_file():
@@ -158,8 +158,8 @@ def _size_of(config):
 
 def update(store_path, scene=None, yes=True, commit=None):
     """Replace baseline entries with the values of the store's latest run; returns the before/after rows."""
-    from .params_cli import config_label
-    from .store import git_commit
+    from harness.params_cli import config_label
+    from harness.store import git_commit
 
     if scene is not None and not scene_path(scene).is_file():
         raise InputError("--scene", "scene", f"unknown scene {scene!r}", f"choose from: {', '.join(list_scenes())}")
@@ -265,8 +265,8 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
     ``into`` writes the new reference to another folder instead of replacing the
     committed one (the accuracy meta-tests keep such re-seeded references).
     """
-    from .imageio import read_exr
-    from .reference.render import render_reference
+    from harness.imageio import read_exr
+    from harness.reference.render import render_reference
 
     scene = load_scene(scene_name).with_resolution(*SMALL_SIZE)
     dest = REF_DIR / scene_name

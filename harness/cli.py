@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from .errors import EnvironmentProblem, InputError
+from harness.errors import EnvironmentProblem, InputError
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -38,7 +38,7 @@ def _positive_int(value):
 # --------------------------------------------------------------------------- subcommands
 
 def cmd_scenes(args):
-    from .scene import list_scenes, load_scene
+    from harness.scene import list_scenes, load_scene
 
     rows = []
     for name in list_scenes():
@@ -53,7 +53,7 @@ def cmd_scenes(args):
 
 
 def cmd_reference(args):
-    from .reference.cache import run_reference_cmd
+    from harness.reference.cache import run_reference_cmd
 
     result = run_reference_cmd(args.scene, out_dir=args.out, target=args.target, spp=args.spp,
                                variant=args.variant, force=args.force)
@@ -63,7 +63,7 @@ def cmd_reference(args):
 def cmd_render(args):
     from sslpv_gl.render_cmd import run_render
 
-    from .params_cli import params_from_cli
+    from harness.params_cli import params_from_cli
 
     params = params_from_cli(vars(args))
     result = run_render(args.scene, args.out, params, as_json=args.json)
@@ -71,27 +71,27 @@ def cmd_render(args):
 
 
 def cmd_compare(args):
-    from .compare_cmd import format_table, run_compare
+    from harness.compare_cmd import format_table, run_compare
 
     result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json)
     _emit(args, result, None if args.json else format_table(result))
 
 
 def cmd_sweep(args):
-    from .sweep import run_sweep_cli
+    from harness.sweep import run_sweep_cli
 
     _emit(args, run_sweep_cli(args))
 
 
 def cmd_report(args):
-    from .report_cmd import run_report_cli
+    from harness.report_cmd import run_report_cli
 
     _emit(args, run_report_cli(args))
 
 
 def cmd_export(args):
-    from .report_cmd import resolve_store
-    from .store import Store
+    from harness.report_cmd import resolve_store
+    from harness.store import Store
 
     with Store(resolve_store(args.source)) as st:
         rows = st.export(args.out, run_id=args.run, scene=args.scene)
@@ -99,7 +99,7 @@ def cmd_export(args):
 
 
 def cmd_nightly(args):
-    from .nightly import run_nightly_cli
+    from harness.nightly import run_nightly_cli
 
     result = run_nightly_cli(args)
     _emit(args, result)
@@ -107,7 +107,7 @@ def cmd_nightly(args):
 
 
 def cmd_baselines(args):
-    from .baselines import run_baselines_cli
+    from harness.baselines import run_baselines_cli
 
     result, text = run_baselines_cli(args)
     _emit(args, result, text)

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .imageio import read_exr
-from .metrics import compare_images
+from harness.errors import InputError
+from harness.imageio import read_exr
+from harness.metrics import compare_images
 
 #: Reference file names whose folder's half_a/half_b are halves of that image.
 _HALVES_BELONG_TO = ("subsurface.exr",)

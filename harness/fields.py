@@ -22,8 +22,8 @@ npz         ``file`` (inside the scene folder), ``key`` (array name, 'data'); th
 import numpy as np
 from scipy import ndimage
 
-from .errors import InputError
-from .geometry import resolve_inside
+from harness.errors import InputError
+from harness.geometry import resolve_inside
 
 FIELD_KINDS = ("constant", "gradient", "split", "layers", "veins", "npz")
 _AXES = {"x": 0, "y": 1, "z": 2}

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from harness.errors import InputError
 
 MESH_KINDS = ("sphere", "torus", "box", "file")
 

@@ -11,8 +11,8 @@ import numpy as np
 import OpenEXR
 from PIL import Image
 
-from .atomic import atomic_write
-from .errors import InputError
+from harness.atomic import atomic_write
+from harness.errors import InputError
 
 _RGB = ("R", "G", "B")
 _SE = ("R_se", "G_se", "B_se")

@@ -7,7 +7,7 @@ kernel (``../shared/NOTES.md``). This must run before ``import mitsuba``.
 import glob
 import os
 
-from .errors import EnvironmentProblem
+from harness.errors import EnvironmentProblem
 
 _CANDIDATES = (
     "/usr/lib/x86_64-linux-gnu/libLLVM.so.{v}*",

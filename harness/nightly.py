@@ -16,18 +16,18 @@ import tomllib
 from datetime import date as _date
 from pathlib import Path
 
-from .atomic import atomic_dir, atomic_write
-from .errors import InputError
-from .params_cli import CLI_TO_FIELD, config_label, parse_lists
-from .scene import list_scenes, load_scene
-from .verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
+from harness.atomic import atomic_dir, atomic_write
+from harness.errors import InputError
+from harness.params_cli import CLI_TO_FIELD, config_label, parse_lists
+from harness.scene import list_scenes, load_scene
+from harness.verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
 
 TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
 
 
 def load_matrix(path):
     """Read and validate the standard matrix file."""
-    from .sweep import parse_size, resolve_scenes
+    from harness.sweep import parse_size, resolve_scenes
 
     path = Path(path)
     if not path.is_file():
@@ -69,7 +69,7 @@ def rows_for_run(store, run_id):
 
 def baseline_rows(scenes, size):
     """Committed baseline rows at the nightly's image size (scenes without any are skipped)."""
-    from .baselines import read_baseline
+    from harness.baselines import read_baseline
 
     rows = []
     for name in scenes:
@@ -96,7 +96,7 @@ def trend_plots(store, night_run_ids, out_dir):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .verdict import badness
+    from harness.verdict import badness
 
     series = {}
     for rid, night in night_run_ids:
@@ -160,9 +160,9 @@ def write_index(out_root):
 
 
 def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True):
-    from .report.build import build_report
-    from .store import Store
-    from .sweep import SweepConfig, run_sweep
+    from harness.report.build import build_report
+    from harness.store import Store
+    from harness.sweep import SweepConfig, run_sweep
 
     matrix = load_matrix(matrix_path)
     night = night or _date.today().isoformat()

@@ -9,7 +9,7 @@ allowed.
 import dataclasses
 import itertools
 
-from .errors import InputError
+from harness.errors import InputError
 
 # command-line name -> SSLPVParams field
 CLI_TO_FIELD = {

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from .errors import InputError
+from harness.errors import InputError
 
 
 def resolve_store(source):
@@ -16,6 +16,6 @@ def resolve_store(source):
 
 
 def run_report_cli(args):
-    from .report.build import build_report
+    from harness.report.build import build_report
 
     return build_report(resolve_store(args.source), args.out, run_id=args.run, cost_budget_ms=args.budget_ms)

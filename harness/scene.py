@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .fields import evaluate_field
-from .geometry import Mesh, build_mesh, points_inside
+from harness.errors import InputError
+from harness.fields import evaluate_field
+from harness.geometry import Mesh, build_mesh, points_inside
 
 SUITE_DIR = Path(__file__).resolve().parent.parent / "reference_scenes"
 BOUNDARY_KINDS = ("index-matched", "dielectric")

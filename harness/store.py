@@ -49,8 +49,8 @@ import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .atomic import atomic_write
-from .errors import InputError
+from harness.atomic import atomic_write
+from harness.errors import InputError
 
 #: Images that metrics are recorded for.
 IMAGES = ("subsurface", "full")

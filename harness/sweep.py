@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 from dask.distributed import WorkerPlugin
 
-from .atomic import atomic_write
-from .errors import InputError
-from .params_cli import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
-from .scene import list_scenes, load_scene, scene_path
+from harness.atomic import atomic_write
+from harness.errors import InputError
+from harness.params_cli import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
+from harness.scene import list_scenes, load_scene, scene_path
 
 SWEEP_FILE = "sweep.json"
 
@@ -110,7 +110,7 @@ def config_from_args(args):
 
 def load_reference(ref_dir, shape):
     """Arrays the workers compare against: subsurface, full, halves and the object mask."""
-    from .imageio import read_exr
+    from harness.imageio import read_exr
 
     ref_dir = Path(ref_dir)
     sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
@@ -128,8 +128,8 @@ def load_reference(ref_dir, shape):
 
 def reference_dir(scene, target=None):
     """The committed small reference when it matches the scene exactly, else the cache's (rendered if absent)."""
-    from .baselines import find_committed_reference
-    from .reference.cache import reference_for
+    from harness.baselines import find_committed_reference
+    from harness.reference.cache import reference_for
 
     committed = find_committed_reference(scene)
     if committed is not None:
@@ -187,7 +187,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
     Everything that can be wrong with the input (scenes, parameters, the scheduler,
     the reference images) is checked before the store or the output folder is touched.
     """
-    from .store import Store
+    from harness.store import Store
 
     t0 = time.perf_counter()
     out = Path(cfg.out)
@@ -241,7 +241,7 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
     """Submit every configuration, then record each result as it arrives (client-side only)."""
     from dask.distributed import as_completed
 
-    from .imageio import auto_exposure
+    from harness.imageio import auto_exposure
 
     from . import sweep_worker
 
@@ -288,7 +288,7 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
 
 def _resume_or_start(store, cfg, out):
     """The same sweep (same folder, same configuration) continues its unfinished run."""
-    from .store import git_commit
+    from harness.store import git_commit
 
     cfg_json = json.loads(cfg.to_json())
     for run in reversed(store.runs()):

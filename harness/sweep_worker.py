@@ -40,7 +40,7 @@ def renderer():
 
 @functools.lru_cache(maxsize=16)
 def _scene(path, size):
-    from .scene import load_scene
+    from harness.scene import load_scene
 
     scene = load_scene(path)
     return scene.with_resolution(*size) if size else scene
@@ -48,7 +48,7 @@ def _scene(path, size):
 
 def measure(images, ref, floors):
     """Metric rows for the subsurface part and the full image, each with its noise floor."""
-    from .metrics import compute_all
+    from harness.metrics import compute_all
 
     rows = []
     for part in ("subsurface", "full"):
@@ -67,7 +67,7 @@ def reference_floors(ref):
     the albedo-0 render, whose noise is far smaller, so the same floor is used for
     both parts.
     """
-    from .metrics import noise_floor
+    from harness.metrics import noise_floor
 
     floors = {name: float(r.value) for name, r in noise_floor(ref["half_a"], ref["half_b"], ref["mask"]).items()}
     return {"subsurface": floors, "full": floors}
@@ -77,7 +77,7 @@ def run_config(scene_path, size, params, ref, floors):
     """Render one configuration and measure it; errors are returned, not raised."""
     from sslpv_gl.params import SSLPVParams
 
-    from .params_cli import config_label
+    from harness.params_cli import config_label
 
     t0 = time.perf_counter()
     try:

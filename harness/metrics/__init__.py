@@ -20,11 +20,11 @@ name               what                                            ideal
 =================  ==============================================  ======
 """
 
-from .colour_difference import ciede2000_mean, ciede2000_p95, delta_e_2000_map
-from .perceptual import flip, ssim
-from .pixel import energy_ratio, mae, relmse, rmse, si_relmse, smape
-from .registry import METRICS, compare_images, compute, compute_all, metric_params, noise_floor
-from .result import MetricResult
+from harness.metrics.colour_difference import ciede2000_mean, ciede2000_p95, delta_e_2000_map
+from harness.metrics.perceptual import flip, ssim
+from harness.metrics.pixel import energy_ratio, mae, relmse, rmse, si_relmse, smape
+from harness.metrics.registry import METRICS, compare_images, compute, compute_all, metric_params, noise_floor
+from harness.metrics.result import MetricResult
 
 __all__ = [
     "METRICS", "MetricResult", "compute", "compute_all", "compare_images", "noise_floor",

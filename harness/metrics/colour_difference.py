@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .result import MetricResult, luminance, masked_map, prepare
+from harness.metrics.result import MetricResult, luminance, masked_map, prepare
 
 #: Percentile of the reference's masked luminance that becomes the white.
 WHITE_PERCENTILE = 99.0

@@ -5,7 +5,7 @@ import functools
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from .result import MetricResult, floats, luminance, masked_map, prepare
+from harness.metrics.result import MetricResult, floats, luminance, masked_map, prepare
 
 #: SSIM settings of Wang et al. 2004: 11x11 Gaussian window, sigma 1.5,
 #: population covariance, K1 = 0.01, K2 = 0.03.

@@ -7,7 +7,7 @@ pixels and the three channels, and return the per-channel values as well.
 
 import numpy as np
 
-from .result import MetricResult, floats, masked_map, prepare
+from harness.metrics.result import MetricResult, floats, masked_map, prepare
 
 #: Default epsilon of relMSE and scale-invariant relMSE (Rousselle et al. 2011).
 RELMSE_EPS = 1e-2

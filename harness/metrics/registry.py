@@ -9,10 +9,10 @@ import inspect
 
 import numpy as np
 
-from .colour_difference import ciede2000_mean, ciede2000_p95
-from .perceptual import flip, ssim
-from .pixel import energy_ratio, mae, relmse, rmse, si_relmse, smape
-from .result import as_image, as_mask, prepare
+from harness.metrics.colour_difference import ciede2000_mean, ciede2000_p95
+from harness.metrics.perceptual import flip, ssim
+from harness.metrics.pixel import energy_ratio, mae, relmse, rmse, si_relmse, smape
+from harness.metrics.result import as_image, as_mask, prepare
 
 #: name -> metric function ``f(test, ref, mask=None, **params) -> MetricResult``.
 METRICS = {

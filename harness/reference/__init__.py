@@ -6,7 +6,7 @@ estimates), :mod:`.cache` (content-addressed cache and the CLI glue). Importing
 this package does not import Mitsuba; :func:`.mitsuba_scene.use_variant` does.
 """
 
-from .cache import default_cache_dir, reference_for, run_reference_cmd
-from .render import render_reference
+from harness.reference.cache import default_cache_dir, reference_for, run_reference_cmd
+from harness.reference.render import render_reference
 
 __all__ = ["default_cache_dir", "reference_for", "render_reference", "run_reference_cmd"]

@@ -7,6 +7,6 @@ maps, sortable metric tables and plots; opens from the file system.
 PosixPath('reports/latest/index.html')
 """
 
-from .build import build_report
+from harness.report.build import build_report
 
 __all__ = ["build_report"]

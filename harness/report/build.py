@@ -29,10 +29,10 @@ import jinja2
 import numpy as np
 from markupsafe import Markup, escape
 
-from .. import imageio
-from ..atomic import atomic_dir
-from ..errors import InputError
-from ..store import STAGES, Store
+from harness.report.. import imageio
+from harness.atomic import atomic_dir
+from harness.errors import InputError
+from harness.store import STAGES, Store
 from . import plots
 
 HERE = Path(__file__).resolve().parent
@@ -122,7 +122,7 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
     flip_compute, flip_note = None, ""
     if flip_maps:
         try:
-            from ..metrics import compute as flip_compute
+            from harness.metrics import compute as flip_compute
         except Exception as exc:  # noqa: BLE001 - the report works without the metrics module
             flip_note = f"harness.metrics could not be imported ({type(exc).__name__}: {exc})."
             notes.append("FLIP maps skipped: " + flip_note)
