@@ -117,7 +117,7 @@ def _write_artifacts(root, scene, params, res, ref, rows):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from harness.imageio import auto_exposure, write_exr, write_png
+    from harness.io.images import auto_exposure, write_exr, write_png
     from harness.store import Store
 
     out = Path(root) / scene.name / config_label(params)

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.atomic import atomic_dir, atomic_write
+from harness.io.atomic import atomic_dir, atomic_write
 from harness.errors import InputError
 from harness.scene import list_scenes, load_scene, scene_path
 
@@ -265,7 +265,7 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
     ``into`` writes the new reference to another folder instead of replacing the
     committed one (the accuracy meta-tests keep such re-seeded references).
     """
-    from harness.imageio import read_exr
+    from harness.io.images import read_exr
     from harness.reference.render import render_reference
 
     scene = load_scene(scene_name).with_resolution(*SMALL_SIZE)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.errors import InputError
-from harness.imageio import read_exr
+from harness.io.images import read_exr
 from harness.metrics import compare_images
 
 #: Reference file names whose folder's half_a/half_b are halves of that image.
@@ -83,7 +83,7 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
     Parameters
     ----------
     ref_path, test_path : str or Path
-        EXR files with R, G, B channels, read with :func:`harness.imageio.read_exr`.
+        EXR files with R, G, B channels, read with :func:`harness.io.images.read_exr`.
     mask_path : str or Path, optional
         A mask (see :func:`read_mask`); all pixels when ``None``.
     as_json : bool, default False

@@ -16,7 +16,7 @@ import tomllib
 from datetime import date as _date
 from pathlib import Path
 
-from harness.atomic import atomic_dir, atomic_write
+from harness.io.atomic import atomic_dir, atomic_write
 from harness.errors import InputError
 from harness.params_cli import CLI_TO_FIELD, config_label, parse_lists
 from harness.scene import list_scenes, load_scene

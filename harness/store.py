@@ -49,7 +49,7 @@ import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
-from harness.atomic import atomic_write
+from harness.io.atomic import atomic_write
 from harness.errors import InputError
 
 #: Images that metrics are recorded for.
@@ -204,7 +204,7 @@ def versions():
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             out[name] = None
-    from . import __version__
+    from harness import __version__
     out["harness"] = __version__
     return out
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from dask.distributed import WorkerPlugin
 
-from harness.atomic import atomic_write
+from harness.io.atomic import atomic_write
 from harness.errors import InputError
 from harness.params_cli import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
 from harness.scene import list_scenes, load_scene, scene_path
@@ -110,7 +110,7 @@ def config_from_args(args):
 
 def load_reference(ref_dir, shape):
     """Arrays the workers compare against: subsurface, full, halves and the object mask."""
-    from harness.imageio import read_exr
+    from harness.io.images import read_exr
 
     ref_dir = Path(ref_dir)
     sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
@@ -150,7 +150,7 @@ class ReleaseGL(WorkerPlugin):
         pass
 
     def teardown(self, worker):
-        from . import sweep_worker
+        from harness import sweep_worker
 
         sweep_worker.release_renderer()
 
@@ -241,9 +241,9 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
     """Submit every configuration, then record each result as it arrives (client-side only)."""
     from dask.distributed import as_completed
 
-    from harness.imageio import auto_exposure
+    from harness.io.images import auto_exposure
 
-    from . import sweep_worker
+    from harness import sweep_worker
 
     shared = {}
     for name, arr in arrays.items():

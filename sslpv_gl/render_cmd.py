@@ -14,8 +14,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from harness.atomic import atomic_dir
-from harness.imageio import auto_exposure, write_exr, write_png
+from harness.io.atomic import atomic_dir
+from harness.io.images import auto_exposure, write_exr, write_png
 from harness.scene import load_scene
 
 from .params import SSLPVParams

@@ -2,7 +2,7 @@
 
 import pytest
 
-from harness.atomic import MARKER, atomic_dir, atomic_write
+from harness.io.atomic import MARKER, atomic_dir, atomic_write
 from harness.errors import InputError
 
 

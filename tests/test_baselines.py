@@ -130,7 +130,7 @@ class TestReferenceAgreement:
         assert not res["agree"]
 
     def test_regenerate_refuses_a_disagreeing_reference(self, sandbox, monkeypatch):
-        from harness.imageio import read_exr, write_exr
+        from harness.io.images import read_exr, write_exr
         from harness.reference import render as ref_render
 
         dest = sandbox / "refs" / "thin_ring"

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.imageio import read_exr
+from harness.io.images import read_exr
 from harness.scene import load_scene
 from sslpv_gl.params import SSLPVParams
 

@@ -7,7 +7,7 @@ import pytest
 
 from harness.compare_cmd import format_table, run_compare
 from harness.errors import InputError
-from harness.imageio import write_exr
+from harness.io.images import write_exr
 from harness.metrics import (METRICS, MetricResult, compare_images, compute, compute_all,
                              noise_floor)
 

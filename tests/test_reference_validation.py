@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from harness.geometry import Mesh
-from harness.imageio import read_exr
+from harness.io.images import read_exr
 from harness.scene import Boundary, Camera, Medium, PointLight, Scene, load_scene, scene_hash
 
 ms = pytest.importorskip("harness.reference.mitsuba_scene")

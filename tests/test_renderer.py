@@ -64,12 +64,12 @@ class TestRender:
         np.testing.assert_array_equal(a.full, b.full)
 
     def test_run_render_writes_folder(self, gl_renderer, tmp_path):
-        from harness.imageio import read_exr
+        from harness.io.images import read_exr
         from sslpv_gl.render_cmd import run_render
 
         out = tmp_path / "r"
         info = run_render("absorbing_sphere", out, SSLPVParams(**SMALL), as_json=True, renderer=gl_renderer)
-        # hidden files (harness.atomic's ownership marker) are not outputs
+        # hidden files (harness.io.atomic's ownership marker) are not outputs
         names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
         assert names == {"full.exr", "subsurface.exr", "preview.png", "render.json"}
         meta = json.loads((out / "render.json").read_text())

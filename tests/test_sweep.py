@@ -144,7 +144,7 @@ class TestBadInput:
         import numpy as np
 
         from harness import sweep
-        from harness.imageio import write_exr
+        from harness.io.images import write_exr
 
         ref = tmp_path / "ref"
         ref.mkdir()

@@ -4,7 +4,7 @@ References live in ``<cache_dir>/<scene.name>/<content_hash[:16]>/``. A folder
 is served only when its ``reference.json`` parses, names the same full
 ``content_hash`` and every listed file is present; anything else (a changed
 scene, a foreign or damaged folder) is rendered again. Folders are written
-atomically (``harness.atomic.atomic_dir``), so a half-written one never exists
+atomically (``harness.io.atomic.atomic_dir``), so a half-written one never exists
 under the final name.
 
 A cached reference made for a looser noise target than the one asked for is
@@ -18,7 +18,7 @@ import os
 import shutil
 from pathlib import Path
 
-from harness.atomic import atomic_dir
+from harness.io.atomic import atomic_dir
 from harness.errors import InputError
 
 from . import render as _render

@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.atomic import atomic_dir
+from harness.io.atomic import atomic_dir
 from harness.errors import InputError
-from harness.imageio import auto_exposure, write_exr, write_png
+from harness.io.images import auto_exposure, write_exr, write_png
 
 from . import mitsuba_scene as ms
 

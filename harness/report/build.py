@@ -11,7 +11,7 @@ Site layout (all links relative, so it opens from the file system)::
     scenes/<scene>/plots/      matplotlib plots
 
 Tone mapping: the reference and every SSLPV image of one kind (subsurface or
-full) share one exposure, :func:`harness.imageio.auto_exposure` of the
+full) share one exposure, :func:`harness.io.images.auto_exposure` of the
 reference. The relative error map is ``mean_c |x - y| / (y + eps)`` with
 ``eps`` = 1% of the reference's mean (over the mask), shown on [0, 1];
 FLIP maps come from ``harness.metrics.compute("flip", ...)``.
@@ -29,8 +29,8 @@ import jinja2
 import numpy as np
 from markupsafe import Markup, escape
 
-from harness.report.. import imageio
-from harness.atomic import atomic_dir
+from harness.io import images
+from harness.io.atomic import atomic_dir
 from harness.errors import InputError
 from harness.store import STAGES, Store
 from . import plots
@@ -321,14 +321,14 @@ def _reference(rdir, index, img_dir, exr_dir):
     for kind in IMAGE_KINDS:
         src = rdir / f"{kind}.exr"
         try:
-            layers = imageio.read_exr(src)
+            layers = images.read_exr(src)
         except InputError as exc:
             out["images"][kind] = {"note": str(exc)}
             continue
         rgb = layers["rgb"]
-        exposure = imageio.auto_exposure(rgb)
+        exposure = images.auto_exposure(rgb)
         png = img_dir / f"{tag}_{kind}.png"
-        imageio.write_png(png, rgb, exposure)
+        images.write_png(png, rgb, exposure)
         exr = _place(src, exr_dir / f"{tag}_{kind}.exr")
         out["rgb"][kind], out["exposure"][kind] = rgb, exposure
         out["png"][kind], out["exr"][kind] = f"img/{png.name}", f"exr/{exr.name}"
@@ -337,7 +337,7 @@ def _reference(rdir, index, img_dir, exr_dir):
             out["mask"] = layers["mask"] > 0.5
     if out["mask"] is None and (rdir / "mask.exr").is_file():
         try:
-            m = imageio.read_exr(rdir / "mask.exr")
+            m = images.read_exr(rdir / "mask.exr")
             out["mask"] = (m["mask"] if "mask" in m else m["rgb"][..., 0]) > 0.5
         except InputError:
             pass
@@ -352,15 +352,15 @@ def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
         return v
     src = Path(c["render_dir"]) / f"{kind}.exr"
     try:
-        test = imageio.read_exr(src)["rgb"]
+        test = images.read_exr(src)["rgb"]
     except InputError as exc:
         v["note"] = str(exc)
         return v
     tag = f"c{c['id']}_{kind}"
     yref = ref["rgb"].get(kind)
-    exposure = ref["exposure"].get(kind, imageio.auto_exposure(test))
+    exposure = ref["exposure"].get(kind, images.auto_exposure(test))
     png = img_dir / f"{tag}.png"
-    imageio.write_png(png, test, exposure)
+    images.write_png(png, test, exposure)
     v["test_png"], v["test_exr"] = f"img/{png.name}", f"exr/{_place(src, exr_dir / f'{tag}.exr').name}"
     if yref is None:
         v["note"] = "no reference image to compare with"
@@ -375,7 +375,7 @@ def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
     if mask is not None:
         rel = np.where(mask, rel, 0.0)
     p = img_dir / f"{tag}_relerr.png"
-    imageio.write_png_uint8(p, plots.false_colour(rel, RELERR["cmap"], RELERR["vmin"], RELERR["vmax"]))
+    images.write_png_uint8(p, plots.false_colour(rel, RELERR["cmap"], RELERR["vmin"], RELERR["vmax"]))
     v["relerr_png"] = f"img/{p.name}"
     if flip_compute is not None:
         try:
@@ -385,7 +385,7 @@ def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
             fmap = None
         if fmap is not None:
             p = img_dir / f"{tag}_flip.png"
-            imageio.write_png_uint8(p, plots.false_colour(fmap, FLIPMAP["cmap"], FLIPMAP["vmin"], FLIPMAP["vmax"]))
+            images.write_png_uint8(p, plots.false_colour(fmap, FLIPMAP["cmap"], FLIPMAP["vmin"], FLIPMAP["vmax"]))
             v["flip_png"] = f"img/{p.name}"
     return v
 

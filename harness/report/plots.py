@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from harness.atomic import atomic_write  # noqa: E402
+from harness.io.atomic import atomic_write  # noqa: E402
 
 #: Paper Fig. 8 (Borlum et al. 2011): the subsurface part was scaled by these
 #: factors at 8, 16 and 32 propagation steps to compensate lost energy.

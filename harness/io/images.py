@@ -11,7 +11,7 @@ import numpy as np
 import OpenEXR
 from PIL import Image
 
-from harness.atomic import atomic_write
+from harness.io.atomic import atomic_write
 from harness.errors import InputError
 
 _RGB = ("R", "G", "B")
