@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness.errors import InputError
-from harness.geometry import grid_inside
+from harness.scene.geometry import grid_inside
 
 from . import shaders as _sh
 from .material import lpv_material

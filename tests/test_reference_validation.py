@@ -22,7 +22,7 @@ import time
 import numpy as np
 import pytest
 
-from harness.geometry import Mesh
+from harness.scene.geometry import Mesh
 from harness.io.images import read_exr
 from harness.scene import Boundary, Camera, Medium, PointLight, Scene, load_scene, scene_hash
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from harness.errors import InputError
-from harness.geometry import grid_inside, points_inside
+from harness.scene.geometry import grid_inside, points_inside
 from harness.scene import SUITE_DIR, list_scenes, load_scene
 
 GOOD = (SUITE_DIR / "sphere_homogeneous" / "scene.toml").read_text()

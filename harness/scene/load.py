@@ -5,9 +5,9 @@ A scene file is data (TOML): no ``eval``, no pickle. Every field is validated
 once here, and a bad field raises :class:`~harness.errors.InputError` with one
 line naming the file, the field, the allowed range and the fix.
 
-Top-level tables: ``units``, ``description``, ``[mesh]`` (``harness.geometry``),
+Top-level tables: ``units``, ``description``, ``[mesh]`` (``harness.scene.geometry``),
 ``[camera]``, ``[[lights]]``, ``[boundary]``, ``[medium]`` (fields in
-``harness.fields``) and ``[tolerances]``. ``reference_scenes/README.md``
+``harness.scene.fields``) and ``[tolerances]``. ``reference_scenes/README.md``
 documents the format with an example.
 """
 
@@ -20,11 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from harness import paths
 from harness.errors import InputError
-from harness.fields import evaluate_field
-from harness.geometry import Mesh, build_mesh, points_inside
+from harness.scene.fields import evaluate_field
+from harness.scene.geometry import Mesh, build_mesh, points_inside
 
-SUITE_DIR = Path(__file__).resolve().parent.parent / "reference_scenes"
+SUITE_DIR = paths.SUITE_DIR
 BOUNDARY_KINDS = ("index-matched", "dielectric")
 _TOP_KEYS = {"units", "description", "mesh", "camera", "lights", "boundary", "medium", "tolerances", "tags"}
 

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from harness.errors import InputError
-from harness.geometry import resolve_inside
+from harness.scene.geometry import resolve_inside
 
 FIELD_KINDS = ("constant", "gradient", "split", "layers", "veins", "npz")
 _AXES = {"x": 0, "y": 1, "z": 2}
