@@ -30,12 +30,14 @@ from pathlib import Path
 import numpy as np
 
 from harness.io.atomic import atomic_dir, atomic_write
+from harness import paths
 from harness.errors import InputError
+from harness.reference import committed
 from harness.scene import list_scenes, load_scene, scene_path
 
-REPO = Path(__file__).resolve().parent.parent
-BASELINE_DIR = REPO / "baselines"
-REF_DIR = BASELINE_DIR / "refs"
+REPO = paths.REPO
+BASELINE_DIR = paths.BASELINE_DIR
+REF_DIR = committed.REF_DIR
 MATRIX_FILE = BASELINE_DIR / "accuracy_matrix.toml"
 SMALL_SIZE = (64, 64)
 #: Family-wise false-rejection probability of the reference check (per image).
@@ -107,26 +109,8 @@ def find_entry(entries, size, params):
 
 
 def committed_reference(scene):
-    """The committed small reference for ``scene`` (at its current size), or an error naming the fix."""
-    ref = REF_DIR / scene.name
-    meta = ref / "reference.json"
-    fix = f"run `sslpv-harness baselines regenerate-references --scene {scene.name}`"
-    if not meta.is_file():
-        raise InputError(ref, "reference", "is missing", fix)
-    info = json.loads(meta.read_text())
-    if info.get("content_hash") != scene.content_hash:
-        raise InputError(meta, "content_hash", f"reference was rendered for scene hash "
-                         f"{str(info.get('content_hash'))[:12]}, the scene now hashes to {scene.content_hash[:12]}",
-                         fix)
-    return ref
-
-
-def find_committed_reference(scene):
-    """Like :func:`committed_reference` but None when there is none for this exact scene."""
-    try:
-        return committed_reference(scene)
-    except InputError:
-        return None
+    """The committed small reference for ``scene`` in :data:`REF_DIR` (see :mod:`harness.reference.committed`)."""
+    return committed.committed_reference(scene, REF_DIR)
 
 
 # --------------------------------------------------------------------------- update

@@ -128,7 +128,7 @@ def load_reference(ref_dir, shape):
 
 def reference_dir(scene, target=None):
     """The committed small reference when it matches the scene exactly, else the cache's (rendered if absent)."""
-    from harness.baselines import find_committed_reference
+    from harness.reference.committed import find_committed_reference
     from harness.reference.cache import reference_for
 
     committed = find_committed_reference(scene)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from harness import baselines
+from harness.reference import committed
 from harness.cli import main
 from harness.errors import InputError
 
@@ -19,6 +20,7 @@ def sandbox(tmp_path, monkeypatch):
     shutil.copytree(baselines.BASELINE_DIR, root)
     monkeypatch.setattr(baselines, "BASELINE_DIR", root)
     monkeypatch.setattr(baselines, "REF_DIR", root / "refs")
+    monkeypatch.setattr(committed, "REF_DIR", root / "refs")   # where a sweep looks for them
     monkeypatch.setattr(baselines, "MATRIX_FILE", root / "accuracy_matrix.toml")
     return root
 

@@ -2,7 +2,9 @@
 
 Modules: :mod:`.phase` (the ``gridhg`` phase function), :mod:`.mitsuba_scene`
 (scene object -> Mitsuba dict), :mod:`.render` (one reference folder with noise
-estimates), :mod:`.cache` (content-addressed cache and the CLI glue). Importing
+estimates), :mod:`.cache` (content-addressed cache and the CLI glue),
+:mod:`.committed` (the small references committed in ``baselines/refs/``) and
+:mod:`.llvm` (finds an LLVM for the ``llvm_*`` variants). Importing
 this package does not import Mitsuba; :func:`.mitsuba_scene.use_variant` does.
 """
 

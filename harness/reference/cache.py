@@ -18,12 +18,13 @@ import os
 import shutil
 from pathlib import Path
 
+from harness import paths
 from harness.io.atomic import atomic_dir
 from harness.errors import InputError
 
 from . import render as _render
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = paths.REPO
 
 
 def default_cache_dir():

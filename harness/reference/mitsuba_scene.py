@@ -34,7 +34,7 @@ lights                 ``point``, RGB intensity in W/sr; background black (no en
 import numpy as np
 
 from harness.errors import InputError
-from harness.llvm import ensure_libllvm
+from harness.reference.llvm import ensure_libllvm
 
 DEFAULT_VARIANT = "llvm_ad_rgb"
 SUPPORTED_VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")

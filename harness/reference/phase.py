@@ -40,7 +40,7 @@ Limits:
   returns value = pdf.
 """
 
-from harness.llvm import ensure_libllvm
+from harness.reference.llvm import ensure_libllvm
 
 try:  # must precede ``import mitsuba``; a CUDA-only machine may have no LLVM (use_variant checks again)
     ensure_libllvm()
