@@ -10,7 +10,7 @@ import sqlite3
 import numpy as np
 import pytest
 
-from harness import store as store_mod
+from harness.store import schema as store_mod
 from harness.errors import InputError
 from harness.store import IMAGES, Store, git_commit, schema_version, versions
 

@@ -3,137 +3,30 @@
 A *run* is one invocation of a sweep (or nightly job); a *configuration* is one
 SSLPV render of one scene with one set of renderer parameters, compared with
 that scene's reference; each configuration has *metric* rows (one per image
-and metric, with its noise floor) and *timing* rows (ms per SSLPV stage).
-
-=================  ==============================================================
-table              columns
-=================  ==============================================================
-``runs``           id, kind (``sweep``, ``nightly``, ...), started_at, finished_at,
-                   date, git_commit, versions_json, machine_json, gl_renderer,
-                   config_json, out_dir, status (``running``, ``ok``, ...)
-``configurations`` id, run_id, scene, scene_hash, config_key, params_json, status
-                   (``ok`` | ``failed``), error, render_dir, reference_dir,
-                   created_at; UNIQUE(run_id, config_key)
-``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
-                   noise_floor, per_channel_json, params_json;
-                   PRIMARY KEY(config_id, image, metric)
-``timings``        config_id, stage (``rsm``, ``injection``, ``propagation``,
-                   ``shading``, ``total``), ms; PRIMARY KEY(config_id, stage)
-=================  ==============================================================
+and metric, with its noise floor) and *timing* rows (ms per SSLPV stage). The
+tables and their migrations are in :mod:`harness.store.schema`; the flat export
+in :mod:`harness.store.export`.
 
 Concurrency: the file is in WAL mode with a 30 s busy timeout, and every write
 is one ``BEGIN IMMEDIATE`` transaction, so several processes (Dask workers) can
 write to one store at once; each opens its own :class:`Store`. Do not put the
 file on a network file system (WAL needs shared memory between processes).
 
-Schema versions: ``PRAGMA user_version`` holds the number of migrations that
-have been applied; :data:`MIGRATIONS` is the ordered list. To change the
-schema, append a function to it (never edit an old one). A store written by a
-newer harness is refused untouched.
-
 Timestamps are UTC ISO 8601 (``2025-01-31T12:00:00+00:00``).
 """
 
 import contextlib
-import csv
 import hashlib
-import importlib.metadata
 import json
 import math
-import os
-import platform
-import socket
 import sqlite3
-import subprocess
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
-from harness.io.atomic import atomic_write
 from harness.errors import InputError
-
-#: Images that metrics are recorded for.
-IMAGES = ("subsurface", "full")
-#: SSLPV stages that timings are recorded for (``total`` is the whole frame).
-STAGES = ("rsm", "injection", "propagation", "shading", "total")
-#: Status of one configuration.
-CONFIG_STATUSES = ("ok", "failed")
-#: Packages whose versions :func:`versions` records.
-VERSIONED_PACKAGES = ("mitsuba", "drjit", "moderngl", "numpy")
-
-BUSY_TIMEOUT_MS = 30_000
-
-
-# ---------------------------------------------------------------- migrations
-
-def _migration_1(db):
-    """Create the four tables."""
-    _run_script(db, """
-        CREATE TABLE runs (
-            id            INTEGER PRIMARY KEY AUTOINCREMENT,
-            kind          TEXT NOT NULL,
-            started_at    TEXT NOT NULL,
-            finished_at   TEXT,
-            date          TEXT NOT NULL,
-            git_commit    TEXT,
-            versions_json TEXT NOT NULL,
-            machine_json  TEXT NOT NULL,
-            gl_renderer   TEXT,
-            config_json   TEXT NOT NULL,
-            out_dir       TEXT,
-            status        TEXT NOT NULL
-        );
-        CREATE TABLE configurations (
-            id            INTEGER PRIMARY KEY AUTOINCREMENT,
-            run_id        INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
-            scene         TEXT NOT NULL,
-            scene_hash    TEXT NOT NULL,
-            config_key    TEXT NOT NULL,
-            params_json   TEXT NOT NULL,
-            status        TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
-            error         TEXT,
-            render_dir    TEXT,
-            reference_dir TEXT,
-            created_at    TEXT NOT NULL,
-            UNIQUE (run_id, config_key)
-        );
-        CREATE INDEX configurations_scene ON configurations(scene, config_key);
-        CREATE TABLE metrics (
-            config_id        INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
-            image            TEXT NOT NULL,
-            metric           TEXT NOT NULL,
-            value            REAL NOT NULL,
-            noise_floor      REAL,
-            per_channel_json TEXT,
-            params_json      TEXT NOT NULL,
-            PRIMARY KEY (config_id, image, metric)
-        );
-        CREATE TABLE timings (
-            config_id INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
-            stage     TEXT NOT NULL,
-            ms        REAL NOT NULL CHECK (ms >= 0),
-            PRIMARY KEY (config_id, stage)
-        );
-    """)
-
-
-def _run_script(db, script):
-    """Run ``;``-separated DDL statement by statement (``executescript`` would
-    COMMIT the migration's transaction half-way)."""
-    for stmt in script.split(";"):
-        if stmt.strip():
-            db.execute(stmt)
-
-
-#: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
-#: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
-#: ``user_version``, so a failed migration leaves the store as it was.
-MIGRATIONS = [_migration_1]
-
-
-def schema_version():
-    """The schema version this harness writes (the number of migrations)."""
-    return len(MIGRATIONS)
+from harness.store import provenance, schema
+from harness.store.schema import BUSY_TIMEOUT_MS, CONFIG_STATUSES, IMAGES, STAGES
 
 
 # ---------------------------------------------------------------- helpers
@@ -182,37 +75,6 @@ def _finite(where, field, value, allow_none=False):
         raise InputError(where, field, f"is {v}, not finite",
                          "record finite numbers (a failed config has status 'failed')")
     return v
-
-
-def git_commit(path=None):
-    """The commit hash of the git checkout at ``path`` (default: this harness's folder), or None."""
-    cwd = Path(path) if path is not None else Path(__file__).resolve().parent
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
-                             timeout=10, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    sha = out.stdout.strip()
-    return sha if out.returncode == 0 and sha else None
-
-
-def versions():
-    """Versions of the renderers and the harness: ``{name: version or None}``."""
-    out = {}
-    for name in VERSIONED_PACKAGES:
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = None
-    from harness import __version__
-    out["harness"] = __version__
-    return out
-
-
-def machine():
-    """Host name, CPU count and platform of this machine."""
-    return {"hostname": socket.gethostname(), "cpu_count": os.cpu_count(),
-            "platform": platform.platform(), "python": platform.python_version()}
 
 
 # ---------------------------------------------------------------- the store
@@ -287,20 +149,20 @@ class Store:
                              "pass a results store or a new file name") from exc
         finally:
             ro.close()
-        if found > schema_version():
+        if found > schema.schema_version():
             raise InputError(self.path, "schema",
-                             f"store schema v{found} is newer than this harness (v{schema_version()})",
+                             f"store schema v{found} is newer than this harness (v{schema.schema_version()})",
                              "upgrade the harness")
 
     def _migrate(self):
         with self._write() as db:
             found = db.execute("PRAGMA user_version").fetchone()[0]
-            if found > schema_version():  # a newer harness migrated it after our read-only check
+            if found > schema.schema_version():  # a newer harness migrated it after our read-only check
                 raise InputError(self.path, "schema",
-                                 f"store schema v{found} is newer than this harness (v{schema_version()})",
+                                 f"store schema v{found} is newer than this harness (v{schema.schema_version()})",
                                  "upgrade the harness")
-            for version in range(found, schema_version()):
-                MIGRATIONS[version](db)
+            for version in range(found, schema.schema_version()):
+                schema.MIGRATIONS[version](db)
                 db.execute(f"PRAGMA user_version = {version + 1}")
 
     def close(self):
@@ -353,12 +215,12 @@ class Store:
         """Record the start of a run; returns its id.
 
         ``config`` is the run's resolved configuration (JSON-ready dict).
-        ``versions`` defaults to :func:`versions`; ``git_commit`` is stored as
-        given (call :func:`git_commit` to fill it).
+        ``versions`` defaults to :func:`~harness.store.provenance.versions`; ``git_commit`` is
+        stored as given (call :func:`~harness.store.provenance.git_commit` to fill it).
         """
         if not isinstance(kind, str) or not kind.strip():
             raise InputError(self.path, "kind", f"is {kind!r}", "name the run kind, e.g. 'sweep' or 'nightly'")
-        vers = globals()["versions"]() if versions is None else versions
+        vers = provenance.versions() if versions is None else versions
         started = _now()
         try:
             config_json = _dumps(config if config is not None else {}, False)
@@ -369,7 +231,7 @@ class Store:
             cur = db.execute(
                 "INSERT INTO runs (kind, started_at, date, git_commit, versions_json, machine_json,"
                 " gl_renderer, config_json, out_dir, status) VALUES (?,?,?,?,?,?,?,?,?,?)",
-                (kind, started, started[:10], git_commit, _dumps(vers), _dumps(machine()),
+                (kind, started, started[:10], git_commit, _dumps(vers), _dumps(provenance.machine()),
                  gl_renderer, config_json, None if out_dir is None else str(out_dir), "running"))
             return cur.lastrowid
 
@@ -617,55 +479,10 @@ class Store:
     # -- export ----------------------------------------------------------------
 
     def export(self, path, run_id=None, scene=None):
-        """Write :meth:`results` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
+        """Write :meth:`results` to ``path`` (see :func:`harness.store.export.export`); returns the row count."""
+        from harness.store.export import export
 
-        Dicts and lists become JSON text columns (``params_json``,
-        ``per_channel_json``, ``metric_params_json``) and each parameter also
-        gets its own ``param.<name>`` column (JSON text). Floats are written
-        with ``repr`` so that they read back exactly. Returns the row count.
-        """
-        path = Path(path)
-        fmt = path.suffix.lower()
-        if fmt not in (".csv", ".parquet"):
-            raise InputError(path, "format", f"unknown extension {path.suffix!r}", "export to .csv or .parquet")
-        if fmt == ".parquet":
-            try:
-                import pyarrow as pa
-                import pyarrow.parquet as pq
-            except ImportError:
-                raise InputError(path, "format", "writing Parquet needs pyarrow, which is not installed",
-                                 "install pyarrow (pip install pyarrow) or export to .csv") from None
-        rows = self.results(run_id, scene)
-        pnames = sorted({k for r in rows for k in r["params"]})
-        flat = []
-        for r in rows:
-            d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params")}
-            d["params_json"] = _dumps(r["params"])
-            d["per_channel_json"] = None if r["per_channel"] is None else _dumps(r["per_channel"], False)
-            d["metric_params_json"] = None if r["metric_params"] is None else _dumps(r["metric_params"], False)
-            for p in pnames:
-                d[f"param.{p}"] = _dumps(r["params"][p]) if p in r["params"] else None
-            flat.append(d)
-        columns = EXPORT_COLUMNS + [f"param.{p}" for p in pnames]
-        with atomic_write(path) as tmp:
-            if fmt == ".parquet":
-                table = pa.Table.from_pylist(flat) if flat else pa.table({c: [] for c in columns})
-                pq.write_table(table, tmp)
-            else:
-                with open(tmp, "w", newline="", encoding="utf-8") as fh:
-                    w = csv.DictWriter(fh, fieldnames=columns)
-                    w.writeheader()
-                    for d in flat:
-                        w.writerow({k: ("" if v is None else repr(v) if isinstance(v, float) else v)
-                                    for k, v in d.items()})
-        return len(flat)
-
-
-#: Fixed leading columns of :meth:`Store.export` (``param.<name>`` columns follow).
-EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "status", "error", "render_dir",
-                  "reference_dir", "created_at", "cost_ms"] + [f"ms_{s}" for s in STAGES] + [
-                  "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
-                  "metric_params_json"]
+        return export(self, path, run_id, scene)
 
 
 class _Row(dict):

@@ -1,0 +1,61 @@
+"""A store's results as one flat table: CSV, or Parquet when pyarrow is installed."""
+
+import csv
+from pathlib import Path
+
+from harness.errors import InputError
+from harness.io.atomic import atomic_write
+from harness.store.schema import STAGES
+from harness.store.store import _dumps
+
+
+#: Fixed leading columns of :meth:`Store.export` (``param.<name>`` columns follow).
+EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "status", "error", "render_dir",
+                  "reference_dir", "created_at", "cost_ms"] + [f"ms_{s}" for s in STAGES] + [
+                  "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
+                  "metric_params_json"]
+
+
+def export(store, path, run_id=None, scene=None):
+    """Write :meth:`Store.results <harness.store.store.Store.results>` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
+
+    Dicts and lists become JSON text columns (``params_json``,
+    ``per_channel_json``, ``metric_params_json``) and each parameter also
+    gets its own ``param.<name>`` column (JSON text). Floats are written
+    with ``repr`` so that they read back exactly. Returns the row count.
+    """
+    path = Path(path)
+    fmt = path.suffix.lower()
+    if fmt not in (".csv", ".parquet"):
+        raise InputError(path, "format", f"unknown extension {path.suffix!r}", "export to .csv or .parquet")
+    if fmt == ".parquet":
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise InputError(path, "format", "writing Parquet needs pyarrow, which is not installed",
+                             "install pyarrow (pip install pyarrow) or export to .csv") from None
+    rows = store.results(run_id, scene)
+    pnames = sorted({k for r in rows for k in r["params"]})
+    flat = []
+    for r in rows:
+        d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params")}
+        d["params_json"] = _dumps(r["params"])
+        d["per_channel_json"] = None if r["per_channel"] is None else _dumps(r["per_channel"], False)
+        d["metric_params_json"] = None if r["metric_params"] is None else _dumps(r["metric_params"], False)
+        for p in pnames:
+            d[f"param.{p}"] = _dumps(r["params"][p]) if p in r["params"] else None
+        flat.append(d)
+    columns = EXPORT_COLUMNS + [f"param.{p}" for p in pnames]
+    with atomic_write(path) as tmp:
+        if fmt == ".parquet":
+            table = pa.Table.from_pylist(flat) if flat else pa.table({c: [] for c in columns})
+            pq.write_table(table, tmp)
+        else:
+            with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                w = csv.DictWriter(fh, fieldnames=columns)
+                w.writeheader()
+                for d in flat:
+                    w.writerow({k: ("" if v is None else repr(v) if isinstance(v, float) else v)
+                                for k, v in d.items()})
+    return len(flat)

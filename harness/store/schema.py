@@ -1,0 +1,116 @@
+"""The results store's schema: its tables, and the migrations that build them.
+
+A *run* is one invocation of a sweep (or nightly job); a *configuration* is one
+SSLPV render of one scene with one set of renderer parameters, compared with
+that scene's reference; each configuration has *metric* rows (one per image
+and metric, with its noise floor) and *timing* rows (ms per SSLPV stage).
+
+=================  ==============================================================
+table              columns
+=================  ==============================================================
+``runs``           id, kind (``sweep``, ``nightly``, ...), started_at, finished_at,
+                   date, git_commit, versions_json, machine_json, gl_renderer,
+                   config_json, out_dir, status (``running``, ``ok``, ...)
+``configurations`` id, run_id, scene, scene_hash, config_key, params_json, status
+                   (``ok`` | ``failed``), error, render_dir, reference_dir,
+                   created_at; UNIQUE(run_id, config_key)
+``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
+                   noise_floor, per_channel_json, params_json;
+                   PRIMARY KEY(config_id, image, metric)
+``timings``        config_id, stage (``rsm``, ``injection``, ``propagation``,
+                   ``shading``, ``total``), ms; PRIMARY KEY(config_id, stage)
+=================  ==============================================================
+
+Concurrency: the file is in WAL mode with a 30 s busy timeout, and every write
+is one ``BEGIN IMMEDIATE`` transaction, so several processes (Dask workers) can
+write to one store at once; each opens its own :class:`Store`. Do not put the
+file on a network file system (WAL needs shared memory between processes).
+
+Schema versions: ``PRAGMA user_version`` holds the number of migrations that
+have been applied; :data:`MIGRATIONS` is the ordered list. To change the
+schema, append a function to it (never edit an old one). A store written by a
+newer harness is refused untouched.
+
+Timestamps are UTC ISO 8601 (``2025-01-31T12:00:00+00:00``).
+"""
+
+#: Images that metrics are recorded for.
+IMAGES = ("subsurface", "full")
+#: SSLPV stages that timings are recorded for (``total`` is the whole frame).
+STAGES = ("rsm", "injection", "propagation", "shading", "total")
+#: Status of one configuration.
+CONFIG_STATUSES = ("ok", "failed")
+
+BUSY_TIMEOUT_MS = 30_000
+
+
+# ---------------------------------------------------------------- migrations
+
+def _migration_1(db):
+    """Create the four tables."""
+    _run_script(db, """
+        CREATE TABLE runs (
+            id            INTEGER PRIMARY KEY AUTOINCREMENT,
+            kind          TEXT NOT NULL,
+            started_at    TEXT NOT NULL,
+            finished_at   TEXT,
+            date          TEXT NOT NULL,
+            git_commit    TEXT,
+            versions_json TEXT NOT NULL,
+            machine_json  TEXT NOT NULL,
+            gl_renderer   TEXT,
+            config_json   TEXT NOT NULL,
+            out_dir       TEXT,
+            status        TEXT NOT NULL
+        );
+        CREATE TABLE configurations (
+            id            INTEGER PRIMARY KEY AUTOINCREMENT,
+            run_id        INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+            scene         TEXT NOT NULL,
+            scene_hash    TEXT NOT NULL,
+            config_key    TEXT NOT NULL,
+            params_json   TEXT NOT NULL,
+            status        TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+            error         TEXT,
+            render_dir    TEXT,
+            reference_dir TEXT,
+            created_at    TEXT NOT NULL,
+            UNIQUE (run_id, config_key)
+        );
+        CREATE INDEX configurations_scene ON configurations(scene, config_key);
+        CREATE TABLE metrics (
+            config_id        INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
+            image            TEXT NOT NULL,
+            metric           TEXT NOT NULL,
+            value            REAL NOT NULL,
+            noise_floor      REAL,
+            per_channel_json TEXT,
+            params_json      TEXT NOT NULL,
+            PRIMARY KEY (config_id, image, metric)
+        );
+        CREATE TABLE timings (
+            config_id INTEGER NOT NULL REFERENCES configurations(id) ON DELETE CASCADE,
+            stage     TEXT NOT NULL,
+            ms        REAL NOT NULL CHECK (ms >= 0),
+            PRIMARY KEY (config_id, stage)
+        );
+    """)
+
+
+def _run_script(db, script):
+    """Run ``;``-separated DDL statement by statement (``executescript`` would
+    COMMIT the migration's transaction half-way)."""
+    for stmt in script.split(";"):
+        if stmt.strip():
+            db.execute(stmt)
+
+
+#: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
+#: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
+#: ``user_version``, so a failed migration leaves the store as it was.
+MIGRATIONS = [_migration_1]
+
+
+def schema_version():
+    """The schema version this harness writes (the number of migrations)."""
+    return len(MIGRATIONS)
