@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.baselines import SMALL_SIZE, committed_reference, find_entry, load_matrix, read_baseline
-from harness.params_cli import config_label, parse_lists, expand
+from harness.runs.params import config_label, parse_lists, expand
 from harness.scene import load_scene
 from harness.verdict import HEADLINE, badness
 
@@ -70,8 +70,8 @@ def small_scene(name):
 
 
 def load_case_reference(scene):
-    from harness.sweep import load_reference
-    from harness.sweep_worker import reference_floors
+    from harness.runs.sweep import load_reference
+    from harness.runs.worker import reference_floors
 
     ref = load_reference(committed_reference(scene), (scene.camera.height, scene.camera.width))
     return ref, reference_floors(ref)
@@ -81,7 +81,7 @@ def check_case(renderer, scene_name, params, tolerance, ref=None, floors=None, a
                write_artifacts=True):
     """Render one case and judge it against its baseline; returns a :class:`CaseResult`."""
     from harness.errors import InputError
-    from harness.sweep_worker import measure
+    from harness.runs.worker import measure
 
     scene = small_scene(scene_name)
     entries = read_baseline(scene_name)

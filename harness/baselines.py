@@ -142,7 +142,7 @@ def _size_of(config):
 
 def update(store_path, scene=None, yes=True, commit=None):
     """Replace baseline entries with the values of the store's latest run; returns the before/after rows."""
-    from harness.params_cli import config_label
+    from harness.runs.params import config_label
     from harness.store import git_commit
 
     if scene is not None and not scene_path(scene).is_file():

@@ -61,9 +61,9 @@ def cmd_reference(args):
 
 
 def cmd_render(args):
-    from sslpv_gl.render_cmd import run_render
+    from harness.runs.render import run_render
 
-    from harness.params_cli import params_from_cli
+    from harness.runs.params import params_from_cli
 
     params = params_from_cli(vars(args))
     result = run_render(args.scene, args.out, params, as_json=args.json)
@@ -78,7 +78,7 @@ def cmd_compare(args):
 
 
 def cmd_sweep(args):
-    from harness.sweep import run_sweep_cli
+    from harness.runs.sweep import run_sweep_cli
 
     _emit(args, run_sweep_cli(args))
 

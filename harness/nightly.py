@@ -18,7 +18,7 @@ from pathlib import Path
 
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.errors import InputError
-from harness.params_cli import CLI_TO_FIELD, config_label, parse_lists
+from harness.runs.params import CLI_TO_FIELD, config_label, parse_lists
 from harness.scene import list_scenes, load_scene
 from harness.verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
 
@@ -27,7 +27,7 @@ TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
 
 def load_matrix(path):
     """Read and validate the standard matrix file."""
-    from harness.sweep import parse_size, resolve_scenes
+    from harness.runs.sweep import parse_size, resolve_scenes
 
     path = Path(path)
     if not path.is_file():
@@ -162,7 +162,7 @@ def write_index(out_root):
 def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True):
     from harness.report.build import build_report
     from harness.store import Store
-    from harness.sweep import SweepConfig, run_sweep
+    from harness.runs.sweep import SweepConfig, run_sweep
 
     matrix = load_matrix(matrix_path)
     night = night or _date.today().isoformat()

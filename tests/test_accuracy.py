@@ -12,7 +12,7 @@ the new values.
 import pytest
 
 from harness.accuracy import cases, check_case
-from harness.params_cli import config_label
+from harness.runs.params import config_label
 
 pytestmark = [pytest.mark.accuracy, pytest.mark.gl]
 

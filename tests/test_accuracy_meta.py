@@ -6,8 +6,8 @@ import pytest
 
 from harness.accuracy import cases, check_case, small_scene
 from harness.baselines import BASELINE_DIR
-from harness.sweep import load_reference
-from harness.sweep_worker import reference_floors
+from harness.runs.sweep import load_reference
+from harness.runs.worker import reference_floors
 from sslpv_gl.params import SSLPVParams
 
 pytestmark = [pytest.mark.accuracy, pytest.mark.gl]

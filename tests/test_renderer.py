@@ -65,7 +65,7 @@ class TestRender:
 
     def test_run_render_writes_folder(self, gl_renderer, tmp_path):
         from harness.io.images import read_exr
-        from sslpv_gl.render_cmd import run_render
+        from harness.runs.render import run_render
 
         out = tmp_path / "r"
         info = run_render("absorbing_sphere", out, SSLPVParams(**SMALL), as_json=True, renderer=gl_renderer)

@@ -17,7 +17,7 @@ import pytest
 from harness.cli import main
 from harness.errors import InputError
 from harness.store import Store
-from harness.sweep import SweepConfig, run_sweep
+from harness.runs.sweep import SweepConfig, run_sweep
 
 pytestmark = [pytest.mark.gl, pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
@@ -48,7 +48,7 @@ def test_two_worker_sweep_stores_everything_and_reruns_from_its_config(tmp_path)
     # Each configuration was measured against ITS scene's reference: the values equal an
     # in-process render measured against that scene's committed reference.
     from harness.accuracy import load_case_reference, small_scene
-    from harness.sweep_worker import measure
+    from harness.runs.worker import measure
     from sslpv_gl.params import SSLPVParams
     from sslpv_gl.renderer import SSLPVRenderer
 

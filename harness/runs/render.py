@@ -1,4 +1,4 @@
-"""``sslpv-harness render SCENE --grid N --steps K ... --out DIR``: one SSLPV render.
+"""One SSLPV render of one scene into a folder (``sslpv-harness render``, and every sweep configuration).
 
 Writes, atomically (the folder appears complete or not at all):
 
@@ -18,7 +18,7 @@ from harness.io.atomic import atomic_dir
 from harness.io.images import auto_exposure, write_exr, write_png
 from harness.scene import load_scene
 
-from .params import SSLPVParams
+from sslpv_gl.params import SSLPVParams
 
 __all__ = ["run_render", "write_render_dir"]
 
@@ -43,7 +43,7 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
     ``renderer`` (an :class:`~sslpv_gl.renderer.SSLPVRenderer`) may be passed to
     reuse a context; ``as_json`` only affects how the CLI prints the result.
     """
-    from .renderer import SSLPVRenderer
+    from sslpv_gl.renderer import SSLPVRenderer
 
     params = params or SSLPVParams()
     scene = load_scene(scene_name_or_path)

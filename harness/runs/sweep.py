@@ -35,7 +35,7 @@ from dask.distributed import WorkerPlugin
 
 from harness.io.atomic import atomic_write
 from harness.errors import InputError
-from harness.params_cli import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
+from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
 from harness.scene import list_scenes, load_scene, scene_path
 
 SWEEP_FILE = "sweep.json"
@@ -150,7 +150,7 @@ class ReleaseGL(WorkerPlugin):
         pass
 
     def teardown(self, worker):
-        from harness import sweep_worker
+        from harness.runs import worker as sweep_worker
 
         sweep_worker.release_renderer()
 
@@ -174,7 +174,7 @@ def make_client(scheduler=None, workers=None):
 
 
 def _write_render(render_dir, res):
-    from sslpv_gl.render_cmd import write_render_dir
+    from harness.runs.render import write_render_dir
 
     info = {k: res[k] for k in ("params", "timings", "gl_renderer", "scene", "scene_hash")}
     write_render_dir(render_dir, res["images"]["full"], res["images"]["subsurface"], res["mask"], info,
@@ -243,7 +243,7 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
 
     from harness.io.images import auto_exposure
 
-    from harness import sweep_worker
+    from harness.runs import worker as sweep_worker
 
     shared = {}
     for name, arr in arrays.items():

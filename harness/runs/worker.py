@@ -77,7 +77,7 @@ def run_config(scene_path, size, params, ref, floors):
     """Render one configuration and measure it; errors are returned, not raised."""
     from sslpv_gl.params import SSLPVParams
 
-    from harness.params_cli import config_label
+    from harness.runs.params import config_label
 
     t0 = time.perf_counter()
     try:
