@@ -10,7 +10,7 @@ happens to move SSLPV closer to the reference passes, by design.
 
 import numpy as np
 
-from harness.accuracy import cases, check_case
+from harness.regression.accuracy import cases, check_case
 from sslpv_gl.renderer import SSLPVRenderer
 
 SABOTAGE = {

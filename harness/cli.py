@@ -99,7 +99,7 @@ def cmd_export(args):
 
 
 def cmd_nightly(args):
-    from harness.nightly import run_nightly_cli
+    from harness.regression.nightly import run_nightly_cli
 
     result = run_nightly_cli(args)
     _emit(args, result)
@@ -107,7 +107,7 @@ def cmd_nightly(args):
 
 
 def cmd_baselines(args):
-    from harness.baselines import run_baselines_cli
+    from harness.regression.baselines import run_baselines_cli
 
     result, text = run_baselines_cli(args)
     _emit(args, result, text)
@@ -169,7 +169,7 @@ def build_parser():
     sp.add_argument("--scene", help="only this scene")
 
     sp = add("nightly", cmd_nightly, "run the standard matrix, append to the store, write the nightly report")
-    sp.add_argument("--matrix", type=Path, default=REPO / "harness" / "nightly_matrix.toml",
+    sp.add_argument("--matrix", type=Path, default=REPO / "harness" / "regression" / "nightly_matrix.toml",
                     help="the standard matrix file")
     sp.add_argument("--store", type=Path, default=REPO / "reports" / "nightly.sqlite", help="results store")
     sp.add_argument("--out", type=Path, default=REPO / "reports" / "nightly", help="reports folder")

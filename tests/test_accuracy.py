@@ -11,7 +11,7 @@ the new values.
 
 import pytest
 
-from harness.accuracy import cases, check_case
+from harness.regression.accuracy import cases, check_case
 from harness.runs.params import config_label
 
 pytestmark = [pytest.mark.accuracy, pytest.mark.gl]

@@ -4,8 +4,8 @@ and a reference re-rendered with new seeds must not (no false alarm from noise).
 import numpy as np
 import pytest
 
-from harness.accuracy import cases, check_case, small_scene
-from harness.baselines import BASELINE_DIR
+from harness.regression.accuracy import cases, check_case, small_scene
+from harness.regression.baselines import BASELINE_DIR
 from harness.runs.sweep import load_reference
 from harness.runs.worker import reference_floors
 from sslpv_gl.params import SSLPVParams

@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from harness import baselines
+from harness.regression import baselines
 from harness.reference import committed
 from harness.cli import main
 from harness.errors import InputError
@@ -49,7 +49,7 @@ class TestValidation:
 
     def test_missing_reference(self, sandbox):
         shutil.rmtree(sandbox / "refs" / "thin_ring")
-        from harness.accuracy import small_scene
+        from harness.regression.accuracy import small_scene
 
         with pytest.raises(InputError, match=r"refs/thin_ring: reference: is missing; run `sslpv-harness baselines "
                                              r"regenerate-references --scene thin_ring`"):
@@ -67,7 +67,7 @@ class TestValidation:
 
 class TestUpdate:
     def test_update_shows_before_after_and_changes_only_that_entry(self, sandbox, tmp_path):
-        from harness.accuracy import small_scene
+        from harness.regression.accuracy import small_scene
         from harness.store import Store
         from sslpv_gl.params import SSLPVParams
 

@@ -6,7 +6,7 @@ import sqlite3
 import pytest
 
 from harness.cli import main
-from harness.verdict import badness, compare_rows, judge, overall
+from harness.regression.verdict import badness, compare_rows, judge, overall
 
 
 class TestVerdict:

@@ -47,7 +47,7 @@ def test_two_worker_sweep_stores_everything_and_reruns_from_its_config(tmp_path)
         assert (Path(c["render_dir"]) / "subsurface.exr").is_file()
     # Each configuration was measured against ITS scene's reference: the values equal an
     # in-process render measured against that scene's committed reference.
-    from harness.accuracy import load_case_reference, small_scene
+    from harness.regression.accuracy import load_case_reference, small_scene
     from harness.runs.worker import measure
     from sslpv_gl.params import SSLPVParams
     from sslpv_gl.renderer import SSLPVRenderer

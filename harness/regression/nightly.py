@@ -1,8 +1,8 @@
 """``sslpv-harness nightly``: the standard matrix, judged against last night and the baselines.
 
-1. Runs the sweep declared in ``harness/nightly_matrix.toml`` (references from the cache)
+1. Runs the sweep declared in ``harness/regression/nightly_matrix.toml`` (references from the cache)
    and appends it to the store as a ``nightly`` run with the date and git commit.
-2. Judges every headline metric (:data:`harness.verdict.HEADLINE`, subsurface and full)
+2. Judges every headline metric (:data:`harness.regression.verdict.HEADLINE`, subsurface and full)
    against the previous night and against the committed baselines: a regression is a
    change beyond the combined noise floors plus the matrix's tolerance.
 3. Writes ``reports/nightly/<date>/``: the sweep report (``report/``), trend plots of each
@@ -20,7 +20,7 @@ from harness.io.atomic import atomic_dir, atomic_write
 from harness.errors import InputError
 from harness.runs.params import CLI_TO_FIELD, config_label, parse_lists
 from harness.scene import list_scenes, load_scene
-from harness.verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
+from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
 
 TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
 
@@ -31,7 +31,7 @@ def load_matrix(path):
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "file", "does not exist", "give the nightly matrix file (harness/nightly_matrix.toml)")
+        raise InputError(path, "file", "does not exist", "give the nightly matrix file (harness/regression/nightly_matrix.toml)")
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
@@ -69,7 +69,7 @@ def rows_for_run(store, run_id):
 
 def baseline_rows(scenes, size):
     """Committed baseline rows at the nightly's image size (scenes without any are skipped)."""
-    from harness.baselines import read_baseline
+    from harness.regression.baselines import read_baseline
 
     rows = []
     for name in scenes:
@@ -96,7 +96,7 @@ def trend_plots(store, night_run_ids, out_dir):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from harness.verdict import badness
+    from harness.regression.verdict import badness
 
     series = {}
     for rid, night in night_run_ids:

@@ -7,7 +7,7 @@ the subsurface part with its baseline. A case fails when
     badness(value) > badness(baseline) + badness(noise floor) + tolerance,
 
 ``tolerance = max(abs, rel * badness(baseline))`` as stated per scene in
-``baselines/accuracy_matrix.toml`` (:mod:`harness.verdict` defines badness). On a
+``baselines/accuracy_matrix.toml`` (:mod:`harness.regression.verdict` defines badness). On a
 failure the images, the reference, an error map and a one-configuration results
 store are written to an artifacts folder, and the message names the command that
 accepts the new values.
@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.baselines import SMALL_SIZE, committed_reference, find_entry, load_matrix, read_baseline
+from harness import paths
+from harness.regression.baselines import SMALL_SIZE, committed_reference, find_entry, load_matrix, read_baseline
 from harness.runs.params import config_label, parse_lists, expand
 from harness.scene import load_scene
-from harness.verdict import HEADLINE, badness
+from harness.regression.verdict import HEADLINE, badness
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = paths.REPO
 ARTIFACTS = REPO / "test-artifacts" / "accuracy"
 
 
