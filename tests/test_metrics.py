@@ -1,11 +1,11 @@
-"""Tests for harness.metrics and harness.compare_cmd, on small hand-checked images."""
+"""Tests for harness.metrics and harness.cli.compare, on small hand-checked images."""
 
 import json
 
 import numpy as np
 import pytest
 
-from harness.compare_cmd import format_table, run_compare
+from harness.cli.compare import format_table, run_compare
 from harness.errors import InputError
 from harness.io.images import write_exr
 from harness.metrics import (METRICS, MetricResult, compare_images, compute, compute_all,

@@ -184,3 +184,17 @@ def _param(v):
     if isinstance(v, float):
         return f"{v:.4g}"
     return str(v)
+
+
+HELP = "print every metric between two EXR files"
+
+
+def configure(sp):
+    sp.add_argument("ref", type=Path, help="reference EXR")
+    sp.add_argument("test", type=Path, help="test EXR")
+    sp.add_argument("--mask", type=Path, help="EXR whose R channel > 0.5 marks the pixels to compare")
+
+
+def run(args):
+    result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json)
+    return result, None if args.json else format_table(result), 0

@@ -19,3 +19,17 @@ def run_report_cli(args):
     from harness.report.build import build_report
 
     return build_report(resolve_store(args.source), args.out, run_id=args.run, cost_budget_ms=args.budget_ms)
+
+
+HELP = "build the static HTML report of a store or a sweep folder"
+
+
+def configure(sp):
+    sp.add_argument("source", type=Path, help="store.sqlite or a sweep folder")
+    sp.add_argument("--out", type=Path, required=True, help="output folder for the site")
+    sp.add_argument("--run", type=int, help="run id (default: the latest)")
+    sp.add_argument("--budget-ms", type=float, help="SSLPV cost budget for the summary (default: median cost)")
+
+
+def run(args):
+    return run_report_cli(args), None, 0

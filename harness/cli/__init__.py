@@ -1,0 +1,10 @@
+"""The command line, ``sslpv-harness``: one module per command, registered in :mod:`.main`.
+
+A command module has ``HELP`` (one line), ``configure(parser)`` (its arguments) and
+``run(args) -> (result, text, exit_code)``. To add a command, write such a module and
+add it to :data:`harness.cli.main.COMMANDS`.
+"""
+
+from harness.cli.main import build_parser, main
+
+__all__ = ["build_parser", "main"]

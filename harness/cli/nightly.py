@@ -1,0 +1,23 @@
+"""``sslpv-harness nightly``: the standard matrix, its verdict, the report and the trends."""
+
+from pathlib import Path
+
+from harness import paths
+
+HELP = "run the standard matrix, append to the store, write the nightly report"
+
+
+def configure(sp):
+    sp.add_argument("--matrix", type=Path, default=paths.REPO / "harness" / "regression" / "nightly_matrix.toml",
+                    help="the standard matrix file")
+    sp.add_argument("--store", type=Path, default=paths.REPO / "reports" / "nightly.sqlite", help="results store")
+    sp.add_argument("--out", type=Path, default=paths.REPO / "reports" / "nightly", help="reports folder")
+    sp.add_argument("--date", help="night's date, YYYY-MM-DD (default: today)")
+    sp.add_argument("--scheduler", help="address of an existing Dask scheduler")
+
+
+def run(args):
+    from harness.regression.nightly import run_nightly_cli
+
+    result = run_nightly_cli(args)
+    return result, None, 1 if result.get("verdict") == "regression" else 0

@@ -1,0 +1,31 @@
+"""Argument helpers that several commands share."""
+
+import argparse
+
+
+def positive_int(value):
+    """argparse type: an integer > 0."""
+    try:
+        out = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{value!r} is not an integer") from None
+    if out <= 0:
+        raise argparse.ArgumentTypeError(f"{value!r} must be > 0")
+    return out
+
+
+def add_sslpv_args(sp, multi):
+    """Renderer parameters; a sweep takes each as a comma-separated list."""
+    kind = "comma-separated list of " if multi else ""
+    sp.add_argument("--grid", help=f"{kind}LPV grid resolution N (cells per axis)")
+    sp.add_argument("--steps", help=f"{kind}propagation steps K")
+    sp.add_argument("--mapping", help=f"{kind}parameter mapping: literal | collision")
+    sp.add_argument("--resample", help=f"{kind}material resampling: box | point")
+    sp.add_argument("--outside", help=f"{kind}cells outside the mesh: vacuum | material")
+    sp.add_argument("--lookup", help=f"{kind}shading lookup: cell | trilinear")
+    sp.add_argument("--skip", help=f"{kind}propagation steps not accumulated (paper: 2)")
+    sp.add_argument("--inject-offset", dest="inject_offset", help=f"{kind}injection offset along -n (scene units)")
+    sp.add_argument("--precision", help=f"{kind}grid precision: fp32 | fp16")
+    sp.add_argument("--rsm-size", dest="rsm_size", help=f"{kind}shadow-map resolution")
+    sp.add_argument("--inject-size", dest="inject_size", help=f"{kind}injection RSM resolution")
+    sp.add_argument("--eta2", help=f"{kind}true: divide outgoing radiance by eta^2 (not in the paper's Eq. 4)")
