@@ -1,8 +1,15 @@
 #!/usr/bin/env bash
-# Sets up (idempotently) and runs the whole test suite. Extra arguments go to pytest.
+# Sets up (idempotently) and runs the checks and the whole test suite. Extra arguments go to pytest.
+#   1. ruff: a small lint rule set ([tool.ruff] in pyproject.toml);
+#   2. lint-imports: the pipeline's layers ([tool.importlinter], docs/architecture.md);
+#   3. pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+echo "test.sh: ruff check"
+.venv/bin/ruff check .
+echo "test.sh: lint-imports"
+.venv/bin/lint-imports --no-cache
 set +e
 .venv/bin/python -m pytest "$@"
 code=$?

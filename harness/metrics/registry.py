@@ -7,7 +7,6 @@ name, the images, the mask and the parameters before dispatching, and
 
 import inspect
 
-import numpy as np
 
 from harness.metrics.colour_difference import ciede2000_mean, ciede2000_p95
 from harness.metrics.perceptual import flip, ssim
