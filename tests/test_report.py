@@ -10,7 +10,7 @@ from urllib.parse import unquote, urlsplit
 import numpy as np
 import pytest
 
-from harness import imageio
+from harness.io import images as imageio
 from harness.errors import InputError
 from harness.report import build_report
 from harness.report import plots

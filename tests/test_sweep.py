@@ -143,7 +143,7 @@ class TestBadInput:
     def test_reference_with_nan_is_refused_before_the_store(self, tmp_path, monkeypatch):
         import numpy as np
 
-        from harness import sweep
+        from harness.runs import sweep
         from harness.io.images import write_exr
 
         ref = tmp_path / "ref"
