@@ -17,9 +17,10 @@ Stages
      - Sec. 3.1, Eq. 1
      - ``texels`` (M, 10) RSM of ONE light; ``offset`` moves the virtual
        point light ``offset`` scene units inwards along ``-n_p`` (0 = paper)
-   * - ``propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None)``
+   * - ``propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None)``
      - Sec. 3.2, Eq. 3, Sec. 4
-     - transfer rule of ``docs/conventions.md``; accumulate steps ``k > skip``
+     - transfer rule of ``docs/conventions.md``; accumulate steps ``k > skip``;
+       ``emit`` (0/1 per cell) makes sink cells (``sslpv_gl.boundary``)
    * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False)``
      - Sec. 3.3, Eq. 4-7
      - ``"cell"`` or ``"trilinear"`` coefficient lookup; ``eta2`` adds the
@@ -127,7 +128,7 @@ def _shift_from(a, offset):
     return out
 
 
-def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None):
+def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None):
     """Propagate and accumulate (Sec. 3.2, Eq. 3, Sec. 4) -> ``(prop, accum)``.
 
     One step, for every destination ``d`` and each of its six neighbours
@@ -144,6 +145,9 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None)
     ``c0`` (N,N,N,3,4); material grids (N,N,N,3); ``dx`` scalar or
     ``(dx, dy, dz)`` (the step along an axis uses that axis' width);
     ``matrices`` defaults to :func:`sslpv_gl.sh.propagation_matrices`.
+    ``emit`` (N,N,N,3), default 1: a factor on what each SOURCE cell sends on;
+    0 makes a sink that keeps (and accumulates) what it received but passes
+    nothing on (``outside = absorb`` / ``extrapolated``, :mod:`sslpv_gl.boundary`).
     Returns float64 arrays of ``c0``'s shape.
     """
     c = np.asarray(c0, dtype=np.float64)
@@ -152,6 +156,8 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None)
     sp = np.broadcast_to(np.asarray(sigma_s_prime, dtype=np.float64), c.shape[:4])
     gg = np.broadcast_to(np.asarray(g, dtype=np.float64), c.shape[:4])
     dxs = np.broadcast_to(np.asarray(dx, dtype=np.float64), (3,))
+
+    em = np.broadcast_to(np.asarray(1.0 if emit is None else emit, dtype=np.float64), c.shape[:4])
 
     k1 = (1.0 - sp) + sp * gg                        # Eq. 3, band 1; band 0 unchanged
     # per-direction attenuation and source material do not change between steps
@@ -164,7 +170,7 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None)
 
     accum = np.zeros_like(c)
     for step in range(1, int(steps) + 1):
-        scattered = c.copy()
+        scattered = c * em[..., None]                # sinks send nothing on
         scattered[..., 1:] *= k1[..., None]
         nxt = np.zeros_like(c)
         for s, offset in enumerate(SOURCE_OFFSETS):

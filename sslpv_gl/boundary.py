@@ -1,0 +1,160 @@
+"""What SSLPV does with light that crosses the object's surface outwards.
+
+The paper propagates light through every cell of the grid, inside the mesh or
+not, and names removing the light that leaves the object as future work (Fig. 8
+caption: "our model does not currently remove light which is leaving the object
+from the propagation grid"). This module makes that choice explicit. Each mode
+gives, per cell and colour, two masks used by the propagation's transfer rule
+(``docs/conventions.md``; ``docs/diffusion_mapping.md`` for the boundary)::
+
+    c_d += M_s @ (emit[s] * exp(-0.5 (sigma[s] + sigma[d]) dx) * S(s) c_s)
+
+* ``material``: where the cell carries the medium's ``sigma_lpv``, ``sigma_s'``
+  (elsewhere both are 0: vacuum);
+* ``emit``: 1 where a cell passes on what it received, 0 where it is a *sink*
+  that records what entered it (the accumulation grid still sums it, so shading
+  can read the escaped flux) but sends nothing on.
+
+Modes
+-----
+
+.. list-table::
+   :header-rows: 1
+
+   * - ``outside``
+     - material
+     - emit
+     - meaning
+   * - ``vacuum`` (default, the paper)
+     - inside cells
+     - every cell
+     - light leaves the object and keeps propagating through empty cells,
+       possibly re-entering it elsewhere
+   * - ``material``
+     - every cell
+     - every cell
+     - the medium fills the whole grid box
+   * - ``absorb``
+     - inside cells
+     - inside cells
+     - outside cells remove what enters them (the paper's Fig. 8 future work)
+   * - ``extrapolated``
+     - inside cells and outside cells within ``z_b`` of the surface
+     - the same cells
+     - diffusion theory's extrapolated boundary: the fluence vanishes at
+       ``z_b = 2 A(eta) D`` beyond the surface (Eq. (B3) below), with the
+       Fresnel-dependent ``A(eta)`` the dipole uses
+
+Equations (cited as "Eq. (Bn)")
+-------------------------------
+(B1) ``F_dr(eta) = 2 int_0^1 R(-mu; eta) mu dmu``: the diffuse Fresnel
+     reflectance of the boundary for light arriving from INSIDE a medium of
+     relative index ``eta`` (Lambertian angular distribution), computed here by
+     Gauss-Legendre quadrature of :func:`sslpv_gl.optics.fresnel_reflectance`.
+     Jensen et al. 2001 use Egan and Hilgeman's fit
+     ``-1.440/eta^2 + 0.710/eta + 0.668 + 0.0636 eta``; the test checks the two.
+(B2) ``A(eta) = (1 + F_dr) / (1 - F_dr)`` (Jensen et al. 2001, Sec. 2.4;
+     Hao & Varshney 2004, Sec. 2).
+(B3) ``z_b = 2 A D`` with ``D = 1 / (3 sigma_t')``, ``sigma_t' = sigma_a + sigma_s (1 - g)``.
+
+Limits
+------
+* Distances to the surface are measured between cell centres on the grid
+  (Euclidean distance transform of the inside mask), so ``z_b`` is resolved to
+  about half a cell; below half a cell the extrapolated layer is empty and the
+  mode equals ``absorb``.
+* ``z_b`` varies with colour (``D`` does); the masks are per colour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .optics import fresnel_reflectance
+
+__all__ = ["OUTSIDE_MODES", "diffuse_fresnel_reflectance", "egan_hilgeman_fdr", "a_of_eta",
+           "extrapolation_distance", "outside_masks"]
+
+#: ``outside`` choices, in the order of the table above.
+OUTSIDE_MODES = ("vacuum", "material", "absorb", "extrapolated")
+
+
+def diffuse_fresnel_reflectance(eta, order=64):
+    """Eq. (B1): ``F_dr`` for light arriving from inside a medium of relative index ``eta``.
+
+    ``F_dr = 2 int_0^1 R(-mu) mu dmu``. Below the critical cosine
+    ``mu_c = sqrt(1 - 1/eta^2)`` the light is totally reflected (``R = 1``), which
+    contributes ``mu_c^2`` exactly; the smooth rest, on ``[mu_c, 1]``, is
+    integrated by Gauss-Legendre quadrature with ``order`` nodes (splitting at the
+    kink makes it accurate to ~1e-12). 0 for ``eta == 1``.
+    """
+    x, w = np.polynomial.legendre.leggauss(int(order))
+    eta = np.asarray(eta, dtype=np.float64)
+    mu_c = np.sqrt(np.clip(1.0 - 1.0 / eta**2, 0.0, 1.0))
+    half = 0.5 * (1.0 - mu_c)
+    mu = mu_c[None] + half[None] * (x.reshape((-1,) + (1,) * eta.ndim) + 1.0)   # nodes on [mu_c, 1]
+    r = fresnel_reflectance(-mu, eta[None])          # negative cos: light from inside
+    wts = w.reshape((-1,) + (1,) * eta.ndim) * half[None]
+    return mu_c**2 + np.sum(wts * 2.0 * mu * r, axis=0)
+
+
+def egan_hilgeman_fdr(eta):
+    """The polynomial fit of ``F_dr`` that Jensen et al. 2001 quote (for comparison only)."""
+    eta = np.asarray(eta, dtype=np.float64)
+    return -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
+
+
+def a_of_eta(eta):
+    """Eq. (B2): the boundary mismatch factor ``A = (1 + F_dr) / (1 - F_dr)``; 1 for ``eta == 1``."""
+    f = diffuse_fresnel_reflectance(eta)
+    return (1.0 + f) / (1.0 - f)
+
+
+def extrapolation_distance(sigma_t, albedo, g, eta):
+    """Eq. (B3): ``z_b = 2 A(eta) D`` in scene units, elementwise (inf where ``sigma_t' = 0``)."""
+    st = np.asarray(sigma_t, dtype=np.float64)
+    a = np.asarray(albedo, dtype=np.float64)
+    gg = np.asarray(g, dtype=np.float64)
+    st_prime = st * (1.0 - a) + st * a * (1.0 - gg)  # sigma_a + sigma_s (1 - g)
+    with np.errstate(divide="ignore"):
+        D = 1.0 / (3.0 * st_prime)
+    return 2.0 * a_of_eta(eta) * D
+
+
+def outside_masks(inside_mask, mode, zb_cells=None):
+    """``(material, emit)`` masks of one outside mode -> two float64 ``(N, N, N, C)`` arrays.
+
+    ``inside_mask`` is ``(N, N, N)`` bool ``[z, y, x]`` (cell centre inside the
+    mesh) or None (every cell inside). ``zb_cells`` is ``z_b / dx``, shape
+    ``(C,)`` or ``(N, N, N, C)`` (needed for ``extrapolated`` only; its value in
+    the nearest inside cell is used). ``C`` is 3 (colours).
+    """
+    if mode not in OUTSIDE_MODES:
+        raise ValueError(f"unknown outside mode {mode!r}; use one of {', '.join(OUTSIDE_MODES)}")
+    if inside_mask is None:
+        return np.ones((1, 1, 1, 3)), np.ones((1, 1, 1, 3))
+    inside = np.asarray(inside_mask, dtype=bool)
+    ins = np.repeat(inside[..., None], 3, axis=-1).astype(np.float64)
+    ones = np.ones_like(ins)
+    if mode == "vacuum":
+        return ins, ones
+    if mode == "material":
+        return ones, ones
+    if mode == "absorb":
+        return ins, ins
+    # extrapolated: outside cells whose centre lies within z_b of the surface keep the medium.
+    from scipy.ndimage import distance_transform_edt
+
+    if zb_cells is None:
+        raise ValueError("outside mode 'extrapolated' needs zb_cells")
+    if not inside.any():
+        return ins, ins
+    # distance (cells) from each outside centre to the nearest inside centre, and that centre's index
+    dist, idx = distance_transform_edt(~inside, return_indices=True)
+    zb = np.asarray(zb_cells, dtype=np.float64)
+    if zb.ndim == 4:
+        zb = zb[idx[0], idx[1], idx[2]]              # the nearest inside cell's z_b
+    # the surface lies about half way between an inside and an outside centre
+    layer = (dist[..., None] - 0.5) <= zb
+    keep = np.where(inside[..., None], True, layer).astype(np.float64)
+    return keep, keep
