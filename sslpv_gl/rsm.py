@@ -1,4 +1,30 @@
-"""Reflective shadow maps (Sec. 3.1): light frusta and the camera, as matrices.
+"""Reflective shadow maps (Sec. 3.1): light frusta, the camera, and the RSM pass.
+
+.. list-table::
+   :header-rows: 1
+
+   * - function
+     - paper
+     - shaders
+     - what
+   * - :func:`light_view`, :func:`light_views`
+     - Sec. 3.1
+     - --
+     - one square frustum per point light, fitted to the mesh's bounding sphere
+   * - :func:`camera_view_proj`
+     - --
+     - ``shade.vert``
+     - the camera of ``docs/conventions.md``, near/far fitted to the mesh
+   * - :func:`render_maps`
+     - Sec. 3.1
+     - ``rsm.vert/frag``
+     - per light: injection RSM (``inject_size``^2: position, normal,
+       ``Phi_p = I dOmega_p``) and a tile of the shadow-map atlas
+       (``rsm_size``^2), same frustum
+   * - :func:`read_texels`
+     - Sec. 3.1
+     - --
+     - an injection RSM read back as ``(M, 10)`` texels (conventions, "RSM texels")
 
 Each point light gets a square perspective frustum aimed at the mesh's
 bounding sphere, its half field of view ``asin(r / d)`` (times a 2 % margin)
@@ -28,8 +54,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view",
-           "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG"]
+from . import shaders as _sh
+
+__all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view", "light_views",
+           "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG", "build_program", "render_maps", "read_texels"]
 
 #: Upper bound of the RSM half field of view (a light inside the bounding
 #: sphere would otherwise need a frustum wider than 180 degrees).
@@ -117,3 +145,73 @@ def gl_bytes(mat):
     """A (…, 4, 4) row-major matrix as column-major float32 bytes for a GLSL mat4."""
     m = np.asarray(mat, dtype=np.float64)
     return np.ascontiguousarray(np.swapaxes(m, -1, -2), dtype=np.float32).tobytes()
+
+
+def light_views(scene):
+    """``(views, centre, radius, warnings)``: :func:`light_view` of every light of ``scene``."""
+    centre, radius = bounding_sphere(scene.mesh)
+    views = [light_view(l.position, centre, radius) for l in scene.lights]
+    warnings = [f"light {i} lies inside the mesh's bounding sphere: RSM field of view capped, part of the "
+                "mesh may receive no injected light" for i, v in enumerate(views) if v.clipped]
+    return views, centre, radius, warnings
+
+
+# ---------------------------------------------------------------- the RSM pass (GL)
+
+def build_program(ctx, warnings):
+    """The RSM program; every uniform changes per light, so none is set here."""
+    prog = _sh.program(ctx, "rsm.vert", "rsm.frag")
+    _sh.check_uniforms(prog, ["u_view_proj", "u_intensity", "u_tan_half", "u_viewport"], "rsm", warnings)
+    return prog
+
+
+def _draw_light(prog, vao, ctx, light, view, viewport):
+    prog["u_view_proj"].write(gl_bytes(view.view_proj))
+    _sh.set_uniform(prog, "u_intensity", tuple(map(float, light.intensity)))
+    _sh.set_uniform(prog, "u_tan_half", (view.tan_half, view.tan_half))
+    # rsm.frag measures each texel's solid angle from its position in this light's viewport
+    _sh.set_uniform(prog, "u_viewport", tuple(map(float, viewport)))
+    vao.render(ctx.TRIANGLES)
+
+
+def render_maps(ctx, prog, vao, targets, scene, params, views):
+    """Injection RSMs (one per light) and the shadow-map atlas.
+
+    ``vao`` draws the mesh with ``prog`` (from :func:`build_program`); ``targets``
+    is the renderer's :class:`sslpv_gl.targets.Targets`. Returns ``(maps, shadow)``:
+    one ``[position, normal, flux]`` texture list per light, and the shadow-map
+    atlas texture (one ``rsm_size``^2 tile per light, side by side).
+    """
+    ctx.disable(ctx.BLEND)
+    ctx.enable(ctx.DEPTH_TEST)
+    maps = []
+    size = params.inject_size
+    for i, (light, view) in enumerate(zip(scene.lights, views)):
+        t = targets.get(("rsm", i), (size, size), 3)
+        t.fbo.use()
+        t.fbo.viewport = (0, 0, size, size)
+        t.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        _draw_light(prog, vao, ctx, light, view, (0, 0, size, size))
+        maps.append(t.textures)
+    s, n = params.rsm_size, len(scene.lights)
+    shadow = targets.get("shadow", (s * n, s), 1)
+    shadow.fbo.use()
+    shadow.fbo.viewport = (0, 0, s * n, s)
+    shadow.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+    for i, (light, view) in enumerate(zip(scene.lights, views)):
+        shadow.fbo.viewport = (i * s, 0, s, s)
+        _draw_light(prog, vao, ctx, light, view, (i * s, 0, s, s))
+    return maps, shadow.textures[0]
+
+
+def read_texels(maps):
+    """The injection RSMs of :func:`render_maps` -> list of ``(M, 10)`` float32, top row first.
+
+    Columns ``[px, py, pz, nx, ny, nz, phi_r, phi_g, phi_b, valid]`` (conventions).
+    """
+    out = []
+    for pos, nrm, flux in maps:
+        arrs = [np.frombuffer(t.read(), dtype="f4").reshape(t.height, t.width, 4)[::-1] for t in (pos, nrm, flux)]
+        tex = np.concatenate([arrs[0][..., :3], arrs[1][..., :3], arrs[2][..., :3], arrs[0][..., 3:4]], axis=-1)
+        out.append(np.ascontiguousarray(tex.reshape(-1, 10), dtype=np.float32))
+    return out

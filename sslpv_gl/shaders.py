@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-__all__ = ["SHADER_DIR", "load_source", "compute", "program", "check_uniforms"]
+__all__ = ["SHADER_DIR", "load_source", "compute", "program", "check_uniforms", "set_uniform"]
 
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -64,3 +64,9 @@ def check_uniforms(prog, names, label, warnings):
         else:
             warnings.append(f"{label}: uniform '{name}' is not active (optimised away by the GLSL compiler)")
     return present
+
+
+def set_uniform(prog, name, value):
+    """Set a uniform that the program uses; an inactive one was reported once by :func:`check_uniforms`."""
+    if name in prog:
+        prog[name].value = value

@@ -1,0 +1,89 @@
+"""The LPV grid textures of one ``(N, precision)``, shared by injection, propagation and shading.
+
+.. list-table::
+   :header-rows: 1
+
+   * - textures
+     - paper
+     - written by
+     - read by
+   * - ``atlas`` (3 x 2D RGBA32F) and ``atlas_fbo``
+     - Sec. 3.1, Eq. 1
+     - ``inject.vert/frag`` (additive blending)
+     - ``unflatten.comp``
+   * - ``prop_a``, ``prop_b`` (3 x 3D each, ping-pong)
+     - Sec. 3.2
+     - ``unflatten.comp``, ``propagate.comp``
+     - ``propagate.comp``
+   * - ``accum`` (3 x 3D)
+     - Sec. 4 (steps ``k > skip``)
+     - ``propagate.comp``
+     - ``shade.frag``
+   * - ``material`` (2 x 3D RGBA32F)
+     - Sec. 3.2.1, Eq. 3
+     - the host (:func:`sslpv_gl.propagate.upload_material`)
+     - ``propagate.comp``
+
+Each SH grid is three RGBA 3D textures, one per colour, four coefficients each
+(``docs/conventions.md``, "SSLPV grids"). ``precision`` applies to the
+propagation and accumulation grids (the paper stores 16-bit floats); the atlas
+and the material are always fp32.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_grid", "write_grid"]
+
+LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster than 4^3 on llvmpipe
+#: precision -> (GLSL image format, moderngl dtype, NumPy dtype)
+FORMATS = {"fp32": ("rgba32f", "f4", np.float32), "fp16": ("rgba16f", "f2", np.float16)}
+
+
+class GridSet:
+    """GL objects for one (N, precision): ping-pong, accumulation, material, injection atlas."""
+
+    def __init__(self, ctx, N, precision):
+        _, dt, _ = FORMATS[precision]
+        self.N = N
+        self.precision = precision
+        nearest = (ctx.NEAREST, ctx.NEAREST)
+
+        def tex3(dtype):
+            t = ctx.texture3d((N, N, N), 4, dtype=dtype)
+            t.filter = nearest
+            t.repeat_x = t.repeat_y = t.repeat_z = False
+            return t
+
+        self.prop_a = [tex3(dt) for _ in range(3)]
+        self.prop_b = [tex3(dt) for _ in range(3)]
+        self.accum = [tex3(dt) for _ in range(3)]
+        self.material = [tex3("f4") for _ in range(2)]      # h = exp(-sigma_lpv dx / 2), h * k1 (Eq. 3)
+        # The injection atlas: z slice k is the N x N tile (k % tiles_x, k // tiles_x)
+        # (why a 2D atlas: sslpv_gl.inject).
+        self.tiles_x = int(math.ceil(math.sqrt(N)))
+        tiles_y = int(math.ceil(N / self.tiles_x))
+        self.atlas_size = (self.tiles_x * N, tiles_y * N)
+        self.atlas = [ctx.texture(self.atlas_size, 4, dtype="f4") for _ in range(3)]
+        for t in self.atlas:
+            t.filter = nearest
+        self.atlas_fbo = ctx.framebuffer(color_attachments=self.atlas)
+        self.groups = (int(math.ceil(N / LOCAL_SIZE)),) * 3
+
+
+def write_grid(texs, c, precision):
+    """Upload an ``(N, N, N, 3, 4)`` SH grid into three colour textures."""
+    dtype = FORMATS[precision][2]
+    for col, t in enumerate(texs):
+        t.write(np.ascontiguousarray(c[..., col, :], dtype=dtype).tobytes())
+
+
+def read_grid(texs, precision):
+    """Three colour textures -> ``(N, N, N, 3, 4)`` float32 ``[z, y, x, colour, coeff]``."""
+    dtype = FORMATS[precision][2]
+    N = texs[0].width
+    cols = [np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4) for t in texs]
+    return np.stack(cols, axis=3).astype(np.float32)

@@ -1,0 +1,109 @@
+"""Propagation (Sec. 3.2, Eq. 3, Sec. 4): the ping-pong of the LPV grid and its accumulation.
+
+.. list-table::
+   :header-rows: 1
+
+   * - function
+     - paper
+     - shaders
+     - what
+   * - :func:`upload_material`
+     - Sec. 3.2.1, Eq. 3
+     - --
+     - per-cell factors of the transfer rule: half a cell of Beer
+       attenuation ``h = exp(-sigma_lpv dx / 2)``, and ``h k1`` with Eq. 3's
+       band-1 factor of the SOURCE cell
+   * - :func:`run`
+     - Sec. 3.2, Sec. 4
+     - ``propagate.comp``
+     - six-neighbour gather with ``sh.propagation_matrices()``, ping-pong,
+       accumulation of steps ``k > skip``
+
+The transfer rule is ``docs/conventions.md``, "SSLPV grids"; the NumPy twin
+(:mod:`sslpv_gl.twin`) implements the same rule in float64.
+
+``propagate.comp`` is compiled in three variants per precision (``ACCUMULATE``
+define): no accumulation (steps ``k <= skip``), the first accumulated step
+(writes the accumulation grid, so it need not be cleared) and later steps
+(adds to it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import shaders as _sh
+from .grids import FORMATS, LOCAL_SIZE
+from .rsm import gl_bytes
+from .sh import propagation_matrices
+
+__all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "upload_material", "run"]
+
+ACC_NONE, ACC_FIRST, ACC_ADD = 0, 1, 2
+ACC_MODES = (ACC_NONE, ACC_FIRST, ACC_ADD)
+_SAMPLERS = ["u_src_r", "u_src_g", "u_src_b", "u_half", "u_hk1"]     # texture units 0-4
+
+
+def build_program(ctx, precision, acc, warnings):
+    """``propagate.comp`` for a grid ``precision`` and accumulation mode ``acc``.
+
+    The constant uniforms are set here: the sampler units (source grid 0-2,
+    material 3-4) and the six propagation matrices ``u_M``.
+    """
+    fmt = FORMATS[precision][0]
+    prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc})
+    images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
+    present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N"],
+                                 f"propagate[{precision},acc={acc}]", warnings)
+    for unit, name in enumerate(_SAMPLERS):
+        if name in present:
+            prog[name].value = unit
+    if "u_M" in present:
+        prog["u_M"].write(gl_bytes(propagation_matrices()))     # (6,4,4) -> 6 column-major mat4
+    return prog
+
+
+def upload_material(grid, material, dx):
+    """Write ``material`` (``lpv_material``'s dict, ``(N, N, N, 3)`` each) into ``grid.material``."""
+    # Per-cell factors of the transfer rule, formed once here instead of per step
+    # and neighbour: h = exp(-sigma dx / 2), half a cell of absorption (Sec. 3.2.1),
+    # and h * k1 with Eq. 3's band-1 factor k1 = (1 - sp) + sp g of the source.
+    N = grid.N
+    sp = np.asarray(material["sigma_s_prime"], dtype=np.float64).reshape(N, N, N, 3)
+    k1 = (1.0 - sp) + sp * np.asarray(material["g"], dtype=np.float64).reshape(N, N, N, 3)
+    sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(N, N, N, 3)
+    half = np.exp(-0.5 * sigma * float(dx))
+    for tex, arr in zip(grid.material, (half, half * k1)):
+        a = np.zeros((N, N, N, 4), dtype=np.float32)
+        a[..., :3] = arr
+        tex.write(a.tobytes())
+
+
+def run(ctx, progs, grid, steps, skip):
+    """Run ``steps`` steps from ``grid.prop_a``; returns the textures holding the final grid.
+
+    ``progs`` maps each of :data:`ACC_MODES` to its :func:`build_program`
+    variant for ``grid.precision``. The accumulation grid ``grid.accum`` holds
+    the sum of the grids after steps ``k > skip``.
+    """
+    for prog in progs.values():
+        _sh.set_uniform(prog, "u_N", grid.N)
+    for unit, t in enumerate(grid.material):
+        t.use(3 + unit)
+    if steps <= skip:                                   # nothing accumulated
+        zero = np.zeros(grid.N ** 3 * 4, dtype=FORMATS[grid.precision][2]).tobytes()
+        for t in grid.accum:
+            t.write(zero)
+    for unit, t in enumerate(grid.accum):
+        t.bind_to_image(3 + unit, read=True, write=True)
+    src, dst = grid.prop_a, grid.prop_b
+    for step in range(1, steps + 1):
+        acc = ACC_NONE if step <= skip else (ACC_FIRST if step == skip + 1 else ACC_ADD)
+        for unit, t in enumerate(src):
+            t.use(unit)
+        for unit, t in enumerate(dst):
+            t.bind_to_image(unit, read=False, write=True)
+        progs[acc].run(*grid.groups)
+        ctx.memory_barrier()
+        src, dst = dst, src                             # ping-pong
+    return src

@@ -1,0 +1,111 @@
+"""Shading (Sec. 3.3, Eqs. 4-7): the camera image from the accumulation grid and the lights.
+
+.. list-table::
+   :header-rows: 1
+
+   * - function
+     - paper
+     - shaders
+     - what
+   * - :func:`run`
+     - Sec. 3.3, Eqs. 4-7
+     - ``shade.vert/frag``
+     - area-light radiance from the accumulation grid (times ``1/eta^2``
+       with ``params.eta2``; not in the paper), plus GGX reflection of each
+       light (shadow-mapped) for a dielectric boundary
+   * - :func:`read_images`
+     - --
+     - --
+     - the four attachments read back, row 0 at the top (conventions)
+
+The accumulation grid is looked up per cell (``lookup="cell"``, NEAREST, as the
+paper) or trilinearly (``lookup="trilinear"``, LINEAR); the ``lookup`` is a
+define of the program and sets the grid textures' filter. Direct reflection is
+the GGX reflection half of a rough dielectric; the smooth limit (roughness 0)
+is not representable with point lights. An index-matched boundary reflects
+nothing (``u_n_lights = 0``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import shaders as _sh
+from .rsm import camera_view_proj, gl_bytes
+
+__all__ = ["MAX_LIGHTS", "build_program", "run", "read_images"]
+
+MAX_LIGHTS = 8          # length of shade.frag's light arrays (the MAX_LIGHTS define)
+
+
+def build_program(ctx, lookup, warnings):
+    """The shading program for ``lookup``; the grid samplers sit on units 0-2, the shadow map on 3."""
+    prog = _sh.program(ctx, "shade.vert", "shade.frag",
+                       {"LOOKUP_TRILINEAR": int(lookup == "trilinear"), "MAX_LIGHTS": MAX_LIGHTS})
+    names = ["u_view_proj", "u_acc_r", "u_acc_g", "u_acc_b", "u_bbox_min", "u_bbox_size", "u_N",
+             "u_area", "u_eta", "u_sub_scale", "u_alpha", "u_cam_pos", "u_n_lights", "u_light_pos", "u_light_I",
+             "u_light_vp", "u_shadow", "u_shadow_size", "u_shadow_texel"]
+    if lookup == "trilinear":
+        names.remove("u_N")                     # only the cell lookup needs N
+    present = _sh.check_uniforms(prog, names, f"shade[{lookup}]", warnings)
+    for unit, name in enumerate(("u_acc_r", "u_acc_g", "u_acc_b", "u_shadow")):
+        if name in present:
+            prog[name].value = unit
+    return prog
+
+
+def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, radius):
+    """Draw the mesh into ``target`` (four attachments: full, subsurface, position, normal).
+
+    ``vao`` draws the mesh with ``prog`` (:func:`build_program` for
+    ``params.lookup``); ``views`` are the lights' :class:`sslpv_gl.rsm.LightView`
+    and ``shadow_tex`` the shadow-map atlas of :func:`sslpv_gl.rsm.render_maps`;
+    ``centre``, ``radius`` the mesh's bounding sphere (camera near/far).
+    """
+    set_ = _sh.set_uniform
+    cam = scene.camera
+    fbo = target.fbo
+    fbo.use()
+    fbo.viewport = (0, 0, cam.width, cam.height)
+    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+    ctx.disable(ctx.BLEND)
+    ctx.enable(ctx.DEPTH_TEST)
+    filt = ctx.LINEAR if params.lookup == "trilinear" else ctx.NEAREST
+    for unit, t in enumerate(grid.accum):
+        t.filter = (filt, filt)
+        t.use(unit)
+    shadow_tex.use(3)
+    med, b = scene.medium, scene.boundary
+    bmin = np.asarray(med.bbox_min, dtype=np.float64)
+    size = np.asarray(med.bbox_max, dtype=np.float64) - bmin
+    dx = float(size[0] / params.N)
+    prog["u_view_proj"].write(gl_bytes(camera_view_proj(cam, centre, radius)))
+    set_(prog, "u_bbox_min", tuple(map(float, bmin)))
+    set_(prog, "u_bbox_size", tuple(map(float, size)))
+    set_(prog, "u_N", params.N)
+    set_(prog, "u_area", dx * dx)                   # A = dx^2, the area light of Eq. 5
+    set_(prog, "u_eta", float(b.eta))
+    set_(prog, "u_sub_scale", 1.0 / (float(b.eta) ** 2) if params.eta2 else 1.0)
+    set_(prog, "u_alpha", float(b.roughness))
+    set_(prog, "u_cam_pos", tuple(map(float, cam.origin)))
+    n = len(scene.lights)
+    set_(prog, "u_n_lights", 0 if b.index_matched else n)
+    pos = np.zeros((MAX_LIGHTS, 3), dtype="f4")
+    inten = np.zeros((MAX_LIGHTS, 3), dtype="f4")
+    vps = np.tile(np.eye(4), (MAX_LIGHTS, 1, 1))
+    texel = np.zeros(MAX_LIGHTS, dtype="f4")
+    for i, (light, view) in enumerate(zip(scene.lights, views)):
+        pos[i], inten[i], vps[i] = light.position, light.intensity, view.view_proj
+        texel[i] = 2.0 * view.tan_half / params.rsm_size        # shadow-map texel size at distance 1
+    for name, data in (("u_light_pos", pos.tobytes()), ("u_light_I", inten.tobytes()),
+                       ("u_light_vp", gl_bytes(vps)), ("u_shadow_texel", texel.tobytes())):
+        if name in prog:
+            prog[name].write(data)
+    set_(prog, "u_shadow_size", params.rsm_size)
+    vao.render(ctx.TRIANGLES)
+
+
+def read_images(target, width, height):
+    """``[full, subsurface, position, normal]``, each ``(height, width, 4)`` float32, row 0 at the top."""
+    return [np.frombuffer(target.fbo.read(components=4, attachment=i, dtype="f4"), dtype="f4")
+            .reshape(height, width, 4)[::-1] for i in range(4)]
