@@ -30,7 +30,7 @@ Parameters of :func:`lpv_material`
      - LPV resolution per axis
    * - ``mapping``
      - ``"collision"``
-     - ``"literal"`` or ``"collision"`` (:data:`MAPPINGS`)
+     - ``"literal"``, ``"collision"`` or ``"diffusion"`` (:data:`MAPPINGS`)
    * - ``resample``
      - ``"box"``
      - ``"box"`` (exact overlap average) or ``"point"`` (trilinear at the
@@ -38,7 +38,15 @@ Parameters of :func:`lpv_material`
    * - ``outside``
      - ``"vacuum"``
      - ``"vacuum"``: cells outside the mesh get ``sigma_lpv = sigma_s' = 0``;
-       ``"material"``: they keep the medium's values
+       ``"material"``: they keep the medium's values; ``"absorb"`` and
+       ``"extrapolated"``: sink cells (:mod:`sslpv_gl.boundary`, which
+       documents all four)
+   * - ``eta``
+     - ``1.0``
+     - the boundary's relative index (``extrapolated``: ``z_b = 2 A(eta) D``)
+   * - ``sigma_scale``
+     - ``1.0``
+     - multiplies the mapped ``sigma_lpv`` (a calibrated free parameter)
 
 Mappings
 --------
@@ -53,6 +61,16 @@ Mappings
     ``exp(-sigma_lpv dx) = exp(-sigma_t dx) + P a`` of the flux, and the kept
     flux that was redirected is ``sigma_s' = P a / (1 - P (1 - a))``. As
     ``dx -> 0``: ``sigma_lpv -> sigma_a`` and ``sigma_s' -> sigma_s dx``.
+``diffusion``
+    Matches diffusion theory (``docs/diffusion_mapping.md``, Eq. (14)-(21);
+    :func:`sslpv_gl.lattice.diffusion_mapping`): with ``sigma_tr =
+    sqrt(3 sigma_a sigma_t')``, ``sigma_t' = sigma_a + sigma_s (1 - g)``,
+    ``sigma_lpv = ln(1 + D_lpv (sigma_tr dx)^2) / dx`` makes the lattice's
+    steady-state diffusion length ``1 / sigma_tr`` at every ``dx``
+    (Eq. (16)); ``sigma_s' = 1`` and the LATTICE ``g = k1 = -1`` (Eq. (17),
+    the most isotropic lattice; the medium's ``g`` enters only through
+    ``sigma_t'``). It is the only mapping with a ``radiance_scale`` other
+    than 1 (Eq. (21)).
 
 Resampling (medium grid -> LPV grid)
 ------------------------------------
@@ -68,6 +86,11 @@ Limits
 * The LPV cells must be cubes (one ``dx`` per step, as the paper's grid);
   a non-cubic medium box raises ``InputError``.
 * ``g`` outside cells is kept; it has no effect once ``sigma_s' = 0``.
+* ``diffusion``: exact for a homogeneous medium far from boundaries; in a
+  heterogeneous medium it is applied cell by cell, which is exact where
+  ``sigma_t'`` is constant (``sigma_a`` may vary) but not across jumps of
+  ``D`` (docs Sec. 6). Vacuum cells (``sigma_t = 0``) get a zero
+  ``radiance_scale``.
 """
 
 from __future__ import annotations
@@ -76,6 +99,8 @@ import numpy as np
 
 from harness.errors import InputError
 
+from . import boundary, lattice
+
 __all__ = [
     "MAPPINGS",
     "RESAMPLERS",
@@ -83,6 +108,7 @@ __all__ = [
     "resample",
     "resample_medium",
     "map_material",
+    "map_material_full",
     "lpv_material",
 ]
 
@@ -179,31 +205,73 @@ def _collision(sigma_t, albedo, dx):
     return sigma_lpv, sigma_s_prime
 
 
-MAPPINGS = {"literal": _literal, "collision": _collision}
+def _diffusion(sigma_t, albedo, dx, g=0.0):
+    # Eq. (16)-(17) of docs/diffusion_mapping.md; Eq. 3's k1 needs the lattice g
+    # that map_material_full returns (sigma_s' = 1, g = k1)
+    m = lattice.diffusion_mapping(sigma_t, albedo, g, dx)
+    return m["sigma_lpv"], m["sigma_s_prime"]
 
 
-def map_material(sigma_t, albedo, dx, mapping="collision"):
+MAPPINGS = {"literal": _literal, "collision": _collision, "diffusion": _diffusion}
+
+
+def map_material(sigma_t, albedo, dx, mapping="collision", g=None):
     """Physical ``(sigma_t, albedo)`` -> LPV ``(sigma_lpv, sigma_s_prime)``, float64.
 
-    See the module docstring for the two mappings. ``dx`` is the LPV cell
-    width in scene units. Unknown ``mapping`` raises ``InputError``.
+    See the module docstring for the mappings. ``dx`` is the LPV cell
+    width in scene units. ``g`` (the medium's, default 0) is used only by
+    ``diffusion``, whose Eq. 3 factor also needs the lattice ``g`` of
+    :func:`map_material_full`. Unknown ``mapping`` raises ``InputError``.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
+    if mapping == "diffusion":
+        return _diffusion(sigma_t, albedo, float(dx), 0.0 if g is None else g)
     return MAPPINGS[mapping](sigma_t, albedo, float(dx))
+
+
+def map_material_full(sigma_t, albedo, g, dx, mapping="collision"):
+    """Everything a mapping sets -> dict of float64 arrays (broadcast shape).
+
+    Keys ``sigma_lpv``, ``sigma_s_prime``, ``g`` (the ``g`` Eq. 3 is to use:
+    the medium's for ``literal``/``collision``, the lattice's ``k1`` for
+    ``diffusion``) and ``radiance_scale`` (the factor on the shaded
+    subsurface radiance, Eq. (21) of ``docs/diffusion_mapping.md``; 1 for
+    ``literal``/``collision``).
+    """
+    _check_choice(mapping, MAPPINGS, "mapping")
+    if mapping == "diffusion":
+        m = lattice.diffusion_mapping(sigma_t, albedo, g, float(dx))
+        return {k: m[k] for k in ("sigma_lpv", "sigma_s_prime", "g", "radiance_scale")}
+    sigma_lpv, sp = MAPPINGS[mapping](sigma_t, albedo, float(dx))
+    shape = np.broadcast(np.asarray(sigma_lpv), np.asarray(sp), np.asarray(g)).shape
+    return {
+        "sigma_lpv": np.broadcast_to(sigma_lpv, shape).astype(np.float64),
+        "sigma_s_prime": np.broadcast_to(sp, shape).astype(np.float64),
+        "g": np.broadcast_to(np.asarray(g, dtype=np.float64), shape).copy(),
+        "radiance_scale": np.ones(shape),
+    }
 
 
 # ------------------------------------------------------------- front door
 
-#: ``outside`` choices of :func:`lpv_material`.
-OUTSIDE_MODES = ("vacuum", "material")
+#: ``outside`` choices of :func:`lpv_material` (:mod:`sslpv_gl.boundary`).
+OUTSIDE_MODES = boundary.OUTSIDE_MODES
 
 
-def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum"):
+def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum", eta=1.0,
+                 sigma_scale=1.0):
     """LPV material grids for Sec. 3.2 -> dict of float32 (N, N, N, 3).
 
-    Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``)
-    and ``g``; arrays are indexed ``[z, y, x, colour]``. Parameters are
-    described in the module docstring.
+    Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``),
+    ``g`` (Eq. 3's; the lattice's for ``diffusion``), ``radiance_scale``
+    (multiplies the shaded subsurface radiance read from each cell, Eq. (21)
+    of ``docs/diffusion_mapping.md``; all 1 except for ``diffusion``) and
+    ``emit`` (0 in sink cells, :mod:`sslpv_gl.boundary`); arrays are indexed
+    ``[z, y, x, colour]``. ``outside`` is one of
+    :data:`sslpv_gl.boundary.OUTSIDE_MODES`; ``eta`` (the boundary's index)
+    sets the extrapolation distance of ``extrapolated``; ``sigma_scale``
+    multiplies the mapped ``sigma_lpv`` (a calibrated free parameter,
+    :mod:`sslpv_gl.calibrated`). Other parameters: the module docstring.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
     _check_choice(resample, RESAMPLERS, "resample")
@@ -221,23 +289,36 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
         )
     dx = float(dxs[0])
 
-    sigma_t, albedo, g = resample_medium(medium, N, resample)
-    sigma_lpv, sigma_s_prime = map_material(sigma_t, albedo, dx, mapping)
-    sigma_s_prime = np.clip(sigma_s_prime, 0.0, 1.0)
+    sigma_t, albedo, g_medium = resample_medium(medium, N, resample)
+    mapped = map_material_full(sigma_t, albedo, g_medium, dx, mapping)
+    sigma_lpv, g = mapped["sigma_lpv"], mapped["g"]
+    if sigma_scale != 1.0:
+        sigma_lpv = sigma_lpv * float(sigma_scale)
+    sigma_s_prime = np.clip(mapped["sigma_s_prime"], 0.0, 1.0)
+    emit = np.ones_like(sigma_lpv)
 
-    if outside == "vacuum" and inside_mask is not None:
+    if inside_mask is not None:
         mask = np.asarray(inside_mask, dtype=bool)
         if mask.shape != (N, N, N):
             raise InputError(
                 "inside_mask", "shape", f"expected {(N, N, N)}, got {mask.shape}",
                 "pass the LPV grid's cell-centre inside mask",
             )
-        # outside the mesh light travels in vacuum: no attenuation, no scattering
-        sigma_lpv = np.where(mask[..., None], sigma_lpv, 0.0)
-        sigma_s_prime = np.where(mask[..., None], sigma_s_prime, 0.0)
+        zb_cells = None
+        if outside == "extrapolated":                # Eq. (B3) of sslpv_gl.boundary, in cells
+            zb_cells = boundary.extrapolation_distance(sigma_t, albedo, g_medium, eta) / dx
+        keep, emit = boundary.outside_masks(mask, outside, zb_cells)
+        # where the medium is not kept, light travels in vacuum: no attenuation, no scattering
+        sigma_lpv = np.where(keep > 0, sigma_lpv, 0.0)
+        sigma_s_prime = np.where(keep > 0, sigma_s_prime, 0.0)
+        emit = np.broadcast_to(emit, sigma_lpv.shape)
 
     return {
         "sigma_lpv": sigma_lpv.astype(np.float32),
         "sigma_s_prime": sigma_s_prime.astype(np.float32),
         "g": g.astype(np.float32),
+        # cells outside the mesh keep the scale of the medium there: it is a
+        # property of the material the cell's light was mapped with
+        "radiance_scale": mapped["radiance_scale"].astype(np.float32),
+        "emit": emit.astype(np.float32),
     }

@@ -19,7 +19,7 @@ def make_medium(sigma_t, albedo, g, extent=2.0):
 
 class TestMappings:
     def test_registry(self):
-        assert set(MAPPINGS) == {"literal", "collision"}
+        assert set(MAPPINGS) == {"literal", "collision", "diffusion"}
 
     def test_literal_is_identity(self):
         st, a = np.array([0.0, 1.5, 40.0]), np.array([0.9, 0.2, 1.0])
@@ -49,9 +49,9 @@ class TestMappings:
         np.testing.assert_allclose(sp, [0.0, 1 - np.exp(-1.0)], rtol=1e-14)
 
     def test_unknown_mapping_raises_input_error(self):
-        with pytest.raises(InputError, match="unknown mapping 'diffusion'") as info:
-            map_material(np.ones(2), np.ones(2), 0.1, "diffusion")
-        assert "literal, collision" in str(info.value)
+        with pytest.raises(InputError, match="unknown mapping 'bogus'") as info:
+            map_material(np.ones(2), np.ones(2), 0.1, "bogus")
+        assert "literal, collision, diffusion" in str(info.value)
         assert isinstance(info.value, ValueError)
         assert "\n" not in str(info.value)
 
