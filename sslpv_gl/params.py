@@ -14,13 +14,27 @@ from dataclasses import dataclass, field
 
 from harness.errors import InputError
 
+from .boundary import OUTSIDE_MODES
+from .calibrated import load_calibrated, parse_mapping
 from .material import MAPPINGS, RESAMPLERS
 
-__all__ = ["SSLPVParams", "LOOKUPS", "PRECISIONS", "OUTSIDE"]
+__all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES"]
 
 LOOKUPS = ("cell", "trilinear")
 PRECISIONS = ("fp32", "fp16")
-OUTSIDE = ("vacuum", "material")
+OUTSIDE = OUTSIDE_MODES
+#: ``steps`` values other than a count: propagate to convergence, or solve the steady state.
+STEP_MODES = ("auto", "steady")
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """What a render actually uses once ``mapping = "calibrated:PATH"`` is looked up."""
+
+    family: str                      # a key of MAPPINGS
+    sigma_scale: float
+    radiance_scale: float
+    calibration: dict | None = None  # {"path", "sha256", "N", "steps"} for a calibrated mapping
 
 
 def _p(default, doc):
@@ -32,8 +46,11 @@ class SSLPVParams:
     """Renderer settings (Borlum et al. 2011; paper defaults where it states them)."""
 
     N: int = _p(32, "LPV grid resolution per axis (paper: 32^3), in [4, 256]")
-    steps: int = _p(32, "propagation steps K (paper: 8 or 32), in [0, 1024]")
-    mapping: str = _p("collision", "physical (sigma_t, albedo) -> LPV (sigma_lpv, sigma_s') mapping")
+    steps: int | str = _p(32, "propagation steps K (paper: 8 or 32), in [0, 1024]; 'auto': until the grid holds "
+                              "less than converge_tol of the injected flux; 'steady': the converged sum, solved "
+                              "directly (sslpv_gl.steady)")
+    mapping: str = _p("collision", "physical (sigma_t, albedo) -> LPV (sigma_lpv, sigma_s') mapping: literal, "
+                                   "collision, diffusion, or calibrated:PATH (a file of sslpv-harness calibrate)")
     resample: str = _p("box", "medium grid -> LPV grid resampling: box average or point (trilinear)")
     outside: str = _p("vacuum", "LPV cells outside the mesh: vacuum (no attenuation/scattering) or material")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
@@ -44,6 +61,11 @@ class SSLPVParams:
     precision: str = _p("fp32", "storage of the SH grids: fp32 or fp16 (paper: 16-bit floats)")
     eta2: bool = _p(False, "divide outgoing radiance by eta^2 (radiance compression leaving a medium of index "
                            "eta; not in the paper's Eq. 4)")
+    sigma_scale: float = _p(1.0, "multiplies the mapping's sigma_lpv (a calibration parameter), in (0, 1e4]")
+    radiance_scale: float = _p(1.0, "multiplies the subsurface radiance (a calibration parameter), in (0, 1e4]")
+    converge_tol: float = _p(1e-3, "steps=auto: stop when the propagation grid holds less than this fraction of "
+                                   "the injected flux, in (0, 1)")
+    max_steps: int = _p(4096, "steps=auto: at most this many steps, in [1, 65536]")
 
     def __post_init__(self):
         def bad(name, problem, fix):
@@ -61,11 +83,15 @@ class SSLPVParams:
                 bad(name, f"unknown {name} {v!r}", "use one of: " + ", ".join(allowed))
 
         integer("N", 4, 256)
-        integer("steps", 0, 1024)
+        st = self.steps
+        if st not in STEP_MODES and (isinstance(st, bool) or not isinstance(st, int) or not 0 <= st <= 1024):
+            bad("steps", f"must be an integer in [0, 1024], 'auto' or 'steady', got {st!r}", "change the value")
         integer("skip", 0, 1024)
         integer("rsm_size", 16, 8192)
         integer("inject_size", 4, 4096)
-        choice("mapping", tuple(MAPPINGS))
+        integer("max_steps", 1, 65536)
+        if parse_mapping(self.mapping) is None:
+            choice("mapping", tuple(MAPPINGS) + ("calibrated:PATH",))
         choice("resample", tuple(RESAMPLERS))
         choice("outside", OUTSIDE)
         choice("lookup", LOOKUPS)
@@ -73,9 +99,20 @@ class SSLPVParams:
         off = self.inject_offset
         if isinstance(off, bool) or not isinstance(off, (int, float)) or not off == off or abs(off) == float("inf"):
             bad("inject_offset", f"must be a finite number, got {off!r}", "change the value")
+        for name, lo, hi in (("sigma_scale", 0.0, 1e4), ("radiance_scale", 0.0, 1e4), ("converge_tol", 0.0, 1.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi or (name == "converge_tol"
+                                                                                               and v >= 1.0):
+                bad(name, f"must be a number in ({lo:g}, {hi:g}{')' if name == 'converge_tol' else ']'}, got {v!r}",
+                    "change the value")
+        if parse_mapping(self.mapping) is not None:
+            if self.sigma_scale != 1.0 or self.radiance_scale != 1.0:
+                bad("mapping", "a calibrated mapping brings its own sigma_scale and radiance_scale",
+                    "leave --sigma-scale and --radiance-scale at 1 with calibrated:PATH")
+            self.resolved()                          # the file and its budget are checked now
         if not isinstance(self.eta2, bool):
             bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")
-        if self.skip > self.steps:
+        if isinstance(self.steps, int) and self.skip > self.steps:
             bad("skip", f"skip {self.skip} must not exceed steps {self.steps} (nothing would be accumulated)",
                 "lower --skip")
 
@@ -83,6 +120,21 @@ class SSLPVParams:
     def doc(name):
         """The one-line description of a field."""
         return {f.name: f.metadata["doc"] for f in dataclasses.fields(SSLPVParams)}[name]
+
+    def resolved(self):
+        """:class:`Resolved`: the mapping family and scales this render uses.
+
+        For ``mapping = "calibrated:PATH"`` they come from the file's budget for
+        ``(N, steps)`` (an :class:`~harness.errors.InputError` if the file is bad or has
+        no such budget); otherwise they are this object's own fields.
+        """
+        path = parse_mapping(self.mapping)
+        if path is None:
+            return Resolved(self.mapping, float(self.sigma_scale), float(self.radiance_scale))
+        cal = load_calibrated(path, tuple(MAPPINGS))
+        b = cal.budget(self.N, self.steps)
+        return Resolved(cal.family, b.sigma_scale, b.radiance_scale,
+                        {"path": cal.path, "sha256": cal.sha256, "N": b.N, "steps": b.steps})
 
     def as_dict(self):
         return dataclasses.asdict(self)

@@ -11,13 +11,20 @@
      - Sec. 3.2.1, Eq. 3
      - --
      - per-cell factors of the transfer rule: half a cell of Beer
-       attenuation ``h = exp(-sigma_lpv dx / 2)``, and ``h k1`` with Eq. 3's
-       band-1 factor of the SOURCE cell
+       attenuation ``h = exp(-sigma_lpv dx / 2)``, and ``h k1 emit``, ``h emit``
+       with Eq. 3's band-1 factor and the emit mask of the SOURCE cell
+       (:mod:`sslpv_gl.boundary`)
    * - :func:`run`
      - Sec. 3.2, Sec. 4
      - ``propagate.comp``
      - six-neighbour gather with ``sh.propagation_matrices()``, ping-pong,
-       accumulation of steps ``k > skip``
+       accumulation of steps ``k > skip``; a callback after each step lets
+       the renderer shade snapshots or stop at convergence (``steps = auto``)
+   * - :func:`scale_accumulation`
+     - Sec. 3.3
+     - ``scale.comp``
+     - the accumulation grid times the per-cell radiance scale, into the grid
+       that shading reads
 
 The transfer rule is ``docs/conventions.md``, "SSLPV grids"; the NumPy twin
 (:mod:`sslpv_gl.twin`) implements the same rule in float64.
@@ -35,20 +42,21 @@ import numpy as np
 from . import shaders as _sh
 from .grids import FORMATS, LOCAL_SIZE
 from .rsm import gl_bytes
-from .sh import propagation_matrices
+from .sh import propagation_matrices, scatter_factors
 
-__all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "upload_material", "run"]
+__all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "build_scale_program",
+           "upload_material", "run", "scale_accumulation"]
 
 ACC_NONE, ACC_FIRST, ACC_ADD = 0, 1, 2
 ACC_MODES = (ACC_NONE, ACC_FIRST, ACC_ADD)
-_SAMPLERS = ["u_src_r", "u_src_g", "u_src_b", "u_half", "u_hk1"]     # texture units 0-4
+_SAMPLERS = ["u_src_r", "u_src_g", "u_src_b", "u_half", "u_hk1", "u_h0"]     # texture units 0-5
 
 
 def build_program(ctx, precision, acc, warnings):
     """``propagate.comp`` for a grid ``precision`` and accumulation mode ``acc``.
 
     The constant uniforms are set here: the sampler units (source grid 0-2,
-    material 3-4) and the six propagation matrices ``u_M``.
+    material 3-5) and the six propagation matrices ``u_M``.
     """
     fmt = FORMATS[precision][0]
     prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc})
@@ -64,41 +72,58 @@ def build_program(ctx, precision, acc, warnings):
 
 
 def upload_material(grid, material, dx):
-    """Write ``material`` (``lpv_material``'s dict, ``(N, N, N, 3)`` each) into ``grid.material``."""
+    """Write ``material`` (``lpv_material``'s dict, ``(N, N, N, 3)`` each) into ``grid.material``.
+
+    Returns True when the material carries a radiance scale other than 1
+    (``radiance_scale`` key), which is then written to ``grid.scale``.
+    """
     # Per-cell factors of the transfer rule, formed once here instead of per step
     # and neighbour: h = exp(-sigma dx / 2), half a cell of absorption (Sec. 3.2.1),
-    # and h * k1 with Eq. 3's band-1 factor k1 = (1 - sp) + sp g of the source.
+    # h * k1 with Eq. 3's band-1 factor k1 = (1 - sp) + sp g of the source, and the
+    # source's emit (0 in sink cells, sslpv_gl.boundary) on both source factors.
     N = grid.N
-    sp = np.asarray(material["sigma_s_prime"], dtype=np.float64).reshape(N, N, N, 3)
-    k1 = (1.0 - sp) + sp * np.asarray(material["g"], dtype=np.float64).reshape(N, N, N, 3)
-    sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(N, N, N, 3)
+    shape = (N, N, N, 3)
+    k1 = scatter_factors(np.asarray(material["sigma_s_prime"], dtype=np.float64).reshape(shape),
+                         np.asarray(material["g"], dtype=np.float64).reshape(shape))[..., 1]
+    sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(shape)
+    emit = np.broadcast_to(np.asarray(material.get("emit", 1.0), dtype=np.float64), shape)
     half = np.exp(-0.5 * sigma * float(dx))
-    for tex, arr in zip(grid.material, (half, half * k1)):
-        a = np.zeros((N, N, N, 4), dtype=np.float32)
-        a[..., :3] = arr
-        tex.write(a.tobytes())
+    for tex, arr in zip(grid.material, (half, half * k1 * emit, half * emit)):
+        tex.write(_rgba(arr))
+    scale = np.broadcast_to(np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64), shape)
+    scaled = bool(np.any(scale != 1.0))
+    if scaled:
+        grid.scale.write(_rgba(scale))
+    return scaled
 
 
-def run(ctx, progs, grid, steps, skip):
-    """Run ``steps`` steps from ``grid.prop_a``; returns the textures holding the final grid.
+def _rgba(rgb):
+    a = np.zeros(rgb.shape[:3] + (4,), dtype=np.float32)
+    a[..., :3] = rgb
+    return a.tobytes()
+
+
+def run(ctx, progs, grid, steps, skip, on_step=None):
+    """Run up to ``steps`` steps from ``grid.prop_a``; returns ``(textures of the last grid, steps run)``.
 
     ``progs`` maps each of :data:`ACC_MODES` to its :func:`build_program`
     variant for ``grid.precision``. The accumulation grid ``grid.accum`` holds
-    the sum of the grids after steps ``k > skip``.
+    the sum of the grids after steps ``k > skip``. ``on_step(step, textures)``,
+    if given, is called after every step with the propagation grid's textures;
+    it returns True to stop there (convergence, ``steps = auto``).
     """
     for prog in progs.values():
         _sh.set_uniform(prog, "u_N", grid.N)
     for unit, t in enumerate(grid.material):
         t.use(3 + unit)
     if steps <= skip:                                   # nothing accumulated
-        zero = np.zeros(grid.N ** 3 * 4, dtype=FORMATS[grid.precision][2]).tobytes()
-        for t in grid.accum:
-            t.write(zero)
-    for unit, t in enumerate(grid.accum):
-        t.bind_to_image(3 + unit, read=True, write=True)
+        clear(grid.accum, grid)
     src, dst = grid.prop_a, grid.prop_b
+    step = 0
     for step in range(1, steps + 1):
         acc = ACC_NONE if step <= skip else (ACC_FIRST if step == skip + 1 else ACC_ADD)
+        for unit, t in enumerate(grid.accum):           # rebound each step: a callback may shade in between
+            t.bind_to_image(3 + unit, read=True, write=True)
         for unit, t in enumerate(src):
             t.use(unit)
         for unit, t in enumerate(dst):
@@ -106,4 +131,39 @@ def run(ctx, progs, grid, steps, skip):
         progs[acc].run(*grid.groups)
         ctx.memory_barrier()
         src, dst = dst, src                             # ping-pong
-    return src
+        if on_step is not None and on_step(step, src):
+            break
+    return src, step
+
+
+def clear(texs, grid):
+    """Zero three grid textures."""
+    zero = np.zeros(grid.N ** 3 * 4, dtype=FORMATS[grid.precision][2]).tobytes()
+    for t in texs:
+        t.write(zero)
+
+
+def build_scale_program(ctx, precision, warnings):
+    """``scale.comp`` for a grid ``precision`` (sampler units: accumulation 0-2, scale 3)."""
+    fmt = FORMATS[precision][0]
+    prog = _sh.compute(ctx, "scale.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE})
+    names = ["u_acc_r", "u_acc_g", "u_acc_b", "u_scale"]
+    present = _sh.check_uniforms(prog, names + ["u_N", "u_dst_r", "u_dst_g", "u_dst_b"],
+                                 f"scale[{precision}]", warnings)
+    for unit, name in enumerate(names):
+        if name in present:
+            prog[name].value = unit
+    return prog
+
+
+def scale_accumulation(ctx, prog, grid):
+    """``grid.scaled = grid.accum * grid.scale`` per cell and colour; returns ``grid.scaled``."""
+    _sh.set_uniform(prog, "u_N", grid.N)
+    for unit, t in enumerate(grid.accum):
+        t.use(unit)
+    grid.scale.use(3)
+    for unit, t in enumerate(grid.scaled):
+        t.bind_to_image(unit, read=False, write=True)
+    prog.run(*grid.groups)
+    ctx.memory_barrier()
+    return grid.scaled

@@ -71,7 +71,7 @@ from . import rsm
 from . import shade as shading
 from .grids import LOCAL_SIZE, GridSet, read_grid, write_grid
 from .material import lpv_material
-from .params import SSLPVParams
+from .params import STEP_MODES, SSLPVParams
 from .shade import MAX_LIGHTS
 from .targets import Targets
 
@@ -86,6 +86,7 @@ _BUILDERS = {
     "unflatten": injection.build_unflatten,     # ("unflatten", precision)
     "propagate": propagation.build_program,     # ("propagate", precision, acc)
     "shade": shading.build_program,             # ("shade", lookup)
+    "scale": propagation.build_scale_program,   # ("scale", precision)
 }
 
 
@@ -117,6 +118,9 @@ class RenderResult:
     warnings: list = field(default_factory=list)
     position: np.ndarray | None = None   # (H, W, 3) world position used for shading (debug)
     normal: np.ndarray | None = None     # (H, W, 3) unit normal used for shading (debug)
+    steps_used: int | None = None        # propagation steps run (None for steps=steady)
+    diagnostics: dict | None = None      # steps_used, injected_flux, remaining_fraction, outside_share
+    calibration: dict | None = None      # path, sha256 and budget of a calibrated mapping
 
 
 class SSLPVRenderer:
@@ -190,13 +194,22 @@ class SSLPVRenderer:
                              "remove lights or raise MAX_LIGHTS")
 
     def lpv_material(self, scene, params):
-        """Per-cell LPV material for the scene (cached per scene hash and material settings)."""
-        key = (scene.content_hash, params.N, params.mapping, params.resample, params.outside)
+        """Per-cell LPV material for the scene (cached per scene hash and material settings).
+
+        The mapping family and ``sigma_scale`` are the resolved ones
+        (:meth:`SSLPVParams.resolved`); the dict also carries the cell-centre
+        inside mask under ``"inside"`` (not uploaded; used for diagnostics).
+        """
+        res = params.resolved()
+        eta = float(scene.boundary.eta)
+        key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta)
         mat = self._material_cache.get(key)
         if mat is None:
             med = scene.medium
             inside = grid_inside(scene.mesh, med.bbox_min, med.bbox_max, params.N)
-            mat = lpv_material(med, inside, params.N, params.mapping, params.resample, params.outside)
+            mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
+                               sigma_scale=res.sigma_scale)
+            mat["inside"] = inside
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.
             if len(self._material_cache) >= 8:
                 self._material_cache.pop(next(iter(self._material_cache)))
@@ -248,9 +261,9 @@ class SSLPVRenderer:
 
     # ------------------------------------------------------------ stage 3: propagation (Sec. 3.2, Sec. 4)
 
-    def _propagate(self, grid, steps, skip):
+    def _propagate(self, grid, steps, skip, on_step=None):
         progs = {acc: self._program(("propagate", grid.precision, acc)) for acc in propagation.ACC_MODES}
-        return propagation.run(self.ctx, progs, grid, steps, skip)
+        return propagation.run(self.ctx, progs, grid, steps, skip, on_step)
 
     def propagate(self, c0, material, dx, steps, skip=2, precision="fp32"):
         """GL propagation of ``c0`` (N,N,N,3,4) with a material dict -> ``(prop, accum)`` float32."""
@@ -260,7 +273,7 @@ class SSLPVRenderer:
         grid = self._grid(N, precision)
         propagation.upload_material(grid, material, dx)
         write_grid(grid.prop_a, c0, precision)
-        final = self._propagate(grid, int(steps), int(skip))
+        final, _ = self._propagate(grid, int(steps), int(skip))
         return read_grid(final, precision), read_grid(grid.accum, precision)
 
     def read_accumulation(self, params):
@@ -269,48 +282,77 @@ class SSLPVRenderer:
 
     # ------------------------------------------------------------ stage 4: shading (Sec. 3.3)
 
-    def _shade(self, scene, params, grid, views, shadow_tex, centre, radius):
+    def _shade(self, scene, params, grid, views, shadow_tex, centre, radius, acc=None):
         prog = self._program(("shade", params.lookup))
         vao = self._mesh_vao(scene, prog, ("shade", params.lookup))
         cam = scene.camera
         target = self._targets.get("shade", (cam.width, cam.height), 4)
-        shading.run(self.ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, radius)
+        shading.run(self.ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, radius, acc)
         return target
 
     # ------------------------------------------------------------ front door
 
-    def render(self, scene, params=None):
-        """Render ``scene`` with SSLPV -> :class:`RenderResult` (images top row first)."""
+    def render(self, scene, params=None, diagnostics=False):
+        """Render ``scene`` with SSLPV -> :class:`RenderResult` (images top row first).
+
+        ``diagnostics=True`` also reads the grids back (outside the stage timers)
+        to fill :attr:`RenderResult.diagnostics`; ``steps = auto`` and ``steady``
+        always do.
+        """
         params = params or SSLPVParams()
         if not isinstance(params, SSLPVParams):
             raise TypeError("params must be an SSLPVParams")
+        return self._render(scene, params, [params.steps], diagnostics)[0]
+
+    def render_steps(self, scene, params, steps_list, diagnostics=False):
+        """One render per step count in ``steps_list``, from ONE propagation -> list of :class:`RenderResult`.
+
+        RSM, injection and the material are made once; the propagation runs to
+        ``max(steps_list)`` and the shading pass runs as each step count passes,
+        so every image is bit-identical to ``render(scene, params.replace(steps=K))``.
+        Each result's ``propagation`` timing is the GL time of the steps up to its
+        ``K`` (what a render of ``K`` alone spends); RSM and injection are the
+        group's, measured once (``timings_ms["shared"]`` lists them).
+        """
+        if not isinstance(params, SSLPVParams):
+            raise TypeError("params must be an SSLPVParams")
+        ks = list(steps_list)
+        if not ks or any(isinstance(k, str) or isinstance(k, bool) or not isinstance(k, int) for k in ks):
+            raise InputError("--steps", "steps", f"snapshots need step counts, got {ks!r}",
+                             "render 'auto' and 'steady' on their own")
+        for k in ks:
+            params.replace(steps=k)                       # validates each (skip <= steps, budgets)
+        return self._render(scene, params, ks, diagnostics)
+
+    def _render(self, scene, params, steps_list, diagnostics):
         self._check_scene(scene)
         ctx = self.ctx
         t_wall = time.perf_counter()
         warnings = []
         t0 = time.perf_counter()
+        mode = params.steps if params.steps in STEP_MODES else None
+        res = params.resolved() if mode else None
         material = self.lpv_material(scene, params)
         views, centre, radius, w = rsm.light_views(scene)
         warnings += w
         grid = self._grid(params.N, params.precision)
         med = scene.medium
         dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
-        propagation.upload_material(grid, material, dx)
+        scaled = propagation.upload_material(grid, _with_global_scale(material, params), dx)
         host_ms = (time.perf_counter() - t0) * 1e3
-        queries = {k: ctx.query(time=True) for k in ("rsm", "injection", "propagation", "shading")}
-
+        queries = {k: ctx.query(time=True) for k in ("rsm", "injection")}
         stage_wall = {}
 
         @contextlib.contextmanager
-        def stage(name):
+        def stage(name, query=None):
             # A host clock around each stage (after a finish) beside the GL timer query:
             # moderngl reads GL_TIME_ELAPSED as 32 bits, which wraps after 4.29 s.
             ctx.finish()
             t = time.perf_counter_ns()
-            with queries[name]:
+            with (query if query is not None else queries[name]):
                 yield
             ctx.finish()
-            stage_wall[name] = time.perf_counter_ns() - t
+            stage_wall[name] = stage_wall.get(name, 0) + time.perf_counter_ns() - t
 
         with stage("rsm"):
             maps, shadow_tex = self._render_rsm(scene, params, views)
@@ -318,25 +360,146 @@ class SSLPVRenderer:
             size = params.inject_size
             sources = [(texs, size * size, light.position) for texs, light in zip(maps, scene.lights)]
             self._inject(grid, sources, scene, params.inject_offset)
-        with stage("propagation"):
-            self._propagate(grid, params.steps, params.skip)
-        with stage("shading"):
-            target = self._shade(scene, params, grid, views, shadow_tex, centre, radius)
+        shared = {k: _gpu_ms(queries[k].elapsed, stage_wall[k], k, warnings) for k in ("rsm", "injection")}
 
-        bufs = shading.read_images(target, scene.camera.width, scene.camera.height)   # outside the stage timers
-        timings = {}
-        for k, q in queries.items():
-            timings[k] = _gpu_ms(q.elapsed, stage_wall[k], k, warnings)
-        timings["host_material"] = host_ms
-        timings["wall"] = (time.perf_counter() - t_wall) * 1e3
-        mask = bufs[1][..., 3] > 0.5
-        return RenderResult(
-            full=np.ascontiguousarray(bufs[0][..., :3]),
-            subsurface=np.ascontiguousarray(bufs[1][..., :3]),
-            mask=mask,
-            timings_ms=timings,
-            gl_renderer=self.gl_renderer,
-            warnings=list(self.warnings) + warnings,
-            position=np.ascontiguousarray(bufs[2][..., :3]),
-            normal=np.ascontiguousarray(bufs[3][..., :3]),
-        )
+        want_diag = diagnostics or mode is not None
+        c0 = read_grid(grid.prop_a, params.precision) if want_diag else None   # outside the stage timers
+        prop_ms = 0.0                                     # GL time of the propagation so far
+        prop_wall = 0
+        outputs = []
+
+        def shade_now(steps_used, final):
+            nonlocal prop_ms
+            q = ctx.query(time=True)
+            with stage("shading", q):
+                acc = self._scale(grid) if scaled else None
+                target = self._shade(scene, params, grid, views, shadow_tex, centre, radius, acc)
+            bufs = shading.read_images(target, scene.camera.width, scene.camera.height)  # outside the timers
+            timings = dict(shared)
+            timings["propagation"] = prop_ms
+            timings["shading"] = _gpu_ms(q.elapsed, stage_wall.pop("shading"), "shading", warnings)
+            timings["host_material"] = host_ms
+            diag = None
+            if want_diag:
+                diag = _diagnostics(c0, None if final is None else read_grid(final, params.precision),
+                                    read_grid(grid.accum, params.precision), material["inside"], steps_used)
+            outputs.append((bufs, timings, steps_used, diag))
+
+        if mode == "steady":
+            t = time.perf_counter_ns()
+            from .steady import steady_state
+
+            acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
+                                     skip=params.skip, emit=material["emit"])
+            write_grid(grid.accum, acc, params.precision)
+            ctx.finish()
+            prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost
+            warnings.append(f"steps=steady: accumulation solved on the host ({info.get('method', 'krylov')}, "
+                            f"{info.get('iterations')} iterations); its propagation time is host wall time")
+            shade_now(None, None)
+        else:
+            targets = sorted(set(steps_list)) if mode is None else []
+            last = targets[-1] if targets else params.max_steps
+            if targets and targets[0] <= params.skip:
+                propagation.clear(grid.accum, grid)        # a snapshot before the first accumulated step
+            check_every = 8
+            injected = _flux(c0) if mode == "auto" else None
+            seg = {"q": None, "t": 0}                      # the running propagation segment
+
+            def begin():
+                ctx.finish()
+                seg["q"] = ctx.query(time=True)
+                seg["t"] = time.perf_counter_ns()
+                seg["q"].__enter__()
+
+            def end():
+                nonlocal prop_ms, prop_wall
+                seg["q"].__exit__(None, None, None)
+                ctx.finish()
+                wall = time.perf_counter_ns() - seg["t"]
+                prop_wall += wall
+                prop_ms += _gpu_ms(seg["q"].elapsed, wall, "propagation", warnings)
+
+            def on_step(step, src):
+                if mode == "auto":
+                    if step % check_every and step != last:
+                        return False
+                    end()                                  # the convergence check is not propagation work
+                    done = step == last or _flux(read_grid(src, params.precision)).max() < \
+                        params.converge_tol * max(float(injected.max()), 1e-300)
+                    if done:
+                        shade_now(step, src)
+                        if step == last:
+                            warnings.append(f"steps=auto: not converged after max_steps={last}")
+                        return True
+                    begin()
+                    return False
+                if step in targets:
+                    end()
+                    shade_now(step, src)
+                    if step == last:
+                        return True
+                    begin()
+                return False
+
+            begin()
+            if last == 0 or (targets and targets[0] == 0):
+                end()
+                shade_now(0, grid.prop_a)
+                if last > 0:
+                    begin()
+            if last > 0:
+                self._propagate(grid, last, params.skip, on_step)
+
+        results = []
+        for bufs, timings, steps_used, diag in outputs:
+            timings["wall"] = (time.perf_counter() - t_wall) * 1e3
+            if len(outputs) > 1:
+                timings["shared"] = ["rsm", "injection", "host_material"]
+            mask = bufs[1][..., 3] > 0.5
+            results.append(RenderResult(
+                full=np.ascontiguousarray(bufs[0][..., :3]),
+                subsurface=np.ascontiguousarray(bufs[1][..., :3]),
+                mask=mask,
+                timings_ms=timings,
+                gl_renderer=self.gl_renderer,
+                warnings=list(self.warnings) + warnings,
+                position=np.ascontiguousarray(bufs[2][..., :3]),
+                normal=np.ascontiguousarray(bufs[3][..., :3]),
+                steps_used=steps_used,
+                diagnostics=diag,
+                calibration=res.calibration if res is not None else params.resolved().calibration,
+            ))
+        return results
+
+    def _scale(self, grid):
+        prog = self._program(("scale", grid.precision))
+        return propagation.scale_accumulation(self.ctx, prog, grid)
+
+
+def _with_global_scale(material, params):
+    """The material with the resolved global radiance scale folded into its per-cell one."""
+    r = params.resolved().radiance_scale
+    if r == 1.0:
+        return material
+    out = dict(material)
+    out["radiance_scale"] = np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64) * r
+    return out
+
+
+def _flux(c):
+    """Total flux per colour of an SH grid, ``sum sqrt(4 pi) |c00|`` (abs: a lattice grid may dip below 0)."""
+    return np.sqrt(4.0 * np.pi) * np.abs(np.asarray(c, dtype=np.float64)[..., 0]).reshape(-1, 3).sum(axis=0)
+
+
+def _diagnostics(c0, final, accum, inside, steps_used):
+    """Where the light is: injected flux, what is still propagating, and the accumulated share outside the mesh."""
+    inj = _flux(c0)
+    acc = np.abs(np.asarray(accum, dtype=np.float64)[..., 0])          # (N, N, N, 3)
+    total = acc.sum(axis=(0, 1, 2))
+    outside = acc[~np.asarray(inside, dtype=bool)].sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        remaining = None if final is None else float(np.max(np.where(inj > 0, _flux(final) / inj, 0.0)))
+        share = float(np.sum(outside) / np.sum(total)) if np.sum(total) > 0 else 0.0
+    return {"steps_used": steps_used, "injected_flux": inj.tolist(), "remaining_fraction": remaining,
+            "outside_share": share}

@@ -54,8 +54,11 @@ def build_program(ctx, lookup, warnings):
     return prog
 
 
-def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, radius):
+def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, radius, acc=None):
     """Draw the mesh into ``target`` (four attachments: full, subsurface, position, normal).
+
+    ``acc``: the three textures to shade from (default ``grid.accum``; the
+    radiance-scaled copy ``grid.scaled`` when a scale applies).
 
     ``vao`` draws the mesh with ``prog`` (:func:`build_program` for
     ``params.lookup``); ``views`` are the lights' :class:`sslpv_gl.rsm.LightView`
@@ -71,7 +74,7 @@ def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, 
     ctx.disable(ctx.BLEND)
     ctx.enable(ctx.DEPTH_TEST)
     filt = ctx.LINEAR if params.lookup == "trilinear" else ctx.NEAREST
-    for unit, t in enumerate(grid.accum):
+    for unit, t in enumerate(grid.accum if acc is None else acc):
         t.filter = (filt, filt)
         t.use(unit)
     shadow_tex.use(3)

@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from .optics import fresnel_transmittance, refract
-from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices
+from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
 
 __all__ = ["inject", "propagate", "shade_points", "cell_index", "sample_trilinear"]
 
@@ -159,7 +159,7 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
 
     em = np.broadcast_to(np.asarray(1.0 if emit is None else emit, dtype=np.float64), c.shape[:4])
 
-    k1 = (1.0 - sp) + sp * gg                        # Eq. 3, band 1; band 0 unchanged
+    k1 = scatter_factors(sp, gg)[..., 1]             # Eq. 3, band 1; band 0 unchanged
     # per-direction attenuation and source material do not change between steps
     atten = []
     for offset in SOURCE_OFFSETS:

@@ -18,10 +18,10 @@ def add_sslpv_args(sp, multi):
     """Renderer parameters; a sweep takes each as a comma-separated list."""
     kind = "comma-separated list of " if multi else ""
     sp.add_argument("--grid", help=f"{kind}LPV grid resolution N (cells per axis)")
-    sp.add_argument("--steps", help=f"{kind}propagation steps K")
-    sp.add_argument("--mapping", help=f"{kind}parameter mapping: literal | collision")
+    sp.add_argument("--steps", help=f"{kind}propagation steps K, or auto (to convergence) or steady (solved)")
+    sp.add_argument("--mapping", help=f"{kind}parameter mapping: literal | collision | diffusion | calibrated:PATH")
     sp.add_argument("--resample", help=f"{kind}material resampling: box | point")
-    sp.add_argument("--outside", help=f"{kind}cells outside the mesh: vacuum | material")
+    sp.add_argument("--outside", help=f"{kind}cells outside the mesh: vacuum | material | absorb | extrapolated")
     sp.add_argument("--lookup", help=f"{kind}shading lookup: cell | trilinear")
     sp.add_argument("--skip", help=f"{kind}propagation steps not accumulated (paper: 2)")
     sp.add_argument("--inject-offset", dest="inject_offset", help=f"{kind}injection offset along -n (scene units)")
@@ -29,3 +29,7 @@ def add_sslpv_args(sp, multi):
     sp.add_argument("--rsm-size", dest="rsm_size", help=f"{kind}shadow-map resolution")
     sp.add_argument("--inject-size", dest="inject_size", help=f"{kind}injection RSM resolution")
     sp.add_argument("--eta2", help=f"{kind}true: divide outgoing radiance by eta^2 (not in the paper's Eq. 4)")
+    sp.add_argument("--sigma-scale", dest="sigma_scale", help=f"{kind}factor on the mapping's sigma_lpv (calibration)")
+    sp.add_argument("--radiance-scale", dest="radiance_scale", help=f"{kind}factor on the subsurface radiance")
+    sp.add_argument("--converge-tol", dest="converge_tol", help=f"{kind}steps=auto: remaining flux fraction to stop at")
+    sp.add_argument("--max-steps", dest="max_steps", help=f"{kind}steps=auto: step cap")

@@ -16,6 +16,8 @@ CLI_TO_FIELD = {
     "grid": "N", "steps": "steps", "mapping": "mapping", "resample": "resample", "outside": "outside",
     "lookup": "lookup", "skip": "skip", "inject_offset": "inject_offset", "precision": "precision",
     "rsm_size": "rsm_size", "inject_size": "inject_size", "eta2": "eta2",
+    "sigma_scale": "sigma_scale", "radiance_scale": "radiance_scale", "converge_tol": "converge_tol",
+    "max_steps": "max_steps",
 }
 FIELD_TO_CLI = {v: k for k, v in CLI_TO_FIELD.items()}
 
@@ -34,6 +36,11 @@ def _convert(cli_name, text, type_name):
         if text.lower() in ("false", "0", "no", "off"):
             return False
         raise InputError(flag, cli_name, f"{text!r} is not true or false", "write true or false")
+    if type_name == "int | str":                     # steps: a count, or a mode ('auto', 'steady')
+        try:
+            return int(text)
+        except ValueError:
+            return text
     try:
         if type_name in ("int", int):
             return int(text)

@@ -5,7 +5,9 @@
 //   S(s) = diag(1, k1, k1, k1), k1 = (1 - sp[s]) + sp[s] g[s]     (Eq. 3, SOURCE cell)
 // Absorption (Sec. 3.2.1) is separable: exp(-1/2 (sigma_s + sigma_d) dx) = h_s h_d with
 // h = exp(-1/2 sigma dx) per cell, formed once on the host. So the gather needs no exp,
-// and h_d multiplies the whole sum once.
+// and h_d multiplies the whole sum once. A sink cell (emit = 0: outside = absorb or
+// extrapolated, sslpv_gl.boundary) keeps what it receives but sends nothing on, so the
+// SOURCE factors carry emit (u_h0 = h emit, u_hk1 = h k1 emit) and the destination's h does not.
 // ACCUMULATE: 0 = propagate only (steps <= skip), 1 = first accumulated step
 // (accum = result), 2 = later steps (accum += result). FORMAT and LOCAL are
 // #defined by the host. Image units are fixed by binding qualifiers
@@ -16,8 +18,9 @@ layout(local_size_x = LOCAL, local_size_y = LOCAL, local_size_z = LOCAL) in;
 uniform sampler3D u_src_r;      // propagation grid, previous step
 uniform sampler3D u_src_g;
 uniform sampler3D u_src_b;
-uniform sampler3D u_half;       // h = exp(-1/2 sigma_lpv dx) per cell, rgb: half a cell of absorption
-uniform sampler3D u_hk1;        // h * k1, k1 = (1 - sp) + sp g (Eq. 3 band-1 factor), rgb
+uniform sampler3D u_half;       // h = exp(-1/2 sigma_lpv dx) per cell, rgb: half a cell of absorption (destination)
+uniform sampler3D u_hk1;        // h * k1 * emit, k1 = (1 - sp) + sp g (Eq. 3 band-1 factor), rgb (source)
+uniform sampler3D u_h0;         // h * emit, rgb (source, band 0)
 uniform mat4  u_M[6];           // propagation matrices, sources at +x,-x,+y,-y,+z,-z
 uniform int   u_N;
 
@@ -46,7 +49,7 @@ void main()
         ivec3 src = d + OFFSETS[s];
         if (any(lessThan(src, ivec3(0))) || any(greaterThanEqual(src, ivec3(u_N))))
             continue;                              // outside the grid: nothing
-        vec3 h = texelFetch(u_half, src, 0).rgb;   // source half of the absorption
+        vec3 h = texelFetch(u_h0, src, 0).rgb;     // source half of the absorption (times emit)
         vec3 hk = texelFetch(u_hk1, src, 0).rgb;   // ... times Eq. 3 of the SOURCE cell
         vec4 cr = texelFetch(u_src_r, src, 0);
         vec4 cg = texelFetch(u_src_g, src, 0);

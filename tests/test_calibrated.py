@@ -1,0 +1,89 @@
+"""sslpv_gl.calibrated: the calibrated-mapping file, its budgets, and one line for every defect."""
+
+import pytest
+
+from harness.errors import InputError
+from sslpv_gl.calibrated import load_calibrated, parse_mapping
+
+FAMILIES = ("literal", "collision", "diffusion")
+
+GOOD = """format = "sslpv-calibrated-mapping"
+version = 1
+family = "diffusion"
+[fit]
+loss = "mean log relMSE"
+[[budget]]
+N = 32
+steps = 8
+sigma_scale = 1.5
+radiance_scale = 0.8
+[[budget]]
+N = 32
+steps = "steady"
+sigma_scale = 1.1
+radiance_scale = 0.9
+sigma_scale_se = 0.01
+"""
+
+
+def write(tmp_path, text, name="cal.toml"):
+    p = tmp_path / name
+    p.write_bytes(text.encode("utf-8") if isinstance(text, str) else text)
+    return p
+
+
+def test_reads_budgets(tmp_path):
+    cal = load_calibrated(write(tmp_path, GOOD), FAMILIES)
+    assert cal.family == "diffusion" and len(cal.sha256) == 64
+    b = cal.budget(32, "steady")
+    assert (b.sigma_scale, b.radiance_scale, b.sigma_scale_se, b.radiance_scale_se) == (1.1, 0.9, 0.01, None)
+    assert cal.budget(32, 8).sigma_scale == 1.5
+
+
+def test_parse_mapping():
+    assert parse_mapping("calibrated:a/b.toml") == "a/b.toml"
+    assert parse_mapping("diffusion") is None
+
+
+def test_hash_follows_content(tmp_path):
+    a = load_calibrated(write(tmp_path, GOOD), FAMILIES)
+    b = load_calibrated(write(tmp_path, GOOD.replace("1.5", "1.6")), FAMILIES)
+    assert a.sha256 != b.sha256 and b.budget(32, 8).sigma_scale == 1.6
+
+
+@pytest.mark.parametrize("text, field", [
+    (GOOD.replace('family = "diffusion"', 'family = "magic"'), "family"),
+    (GOOD.replace("version = 1", "version = 2"), "version"),
+    (GOOD.replace('format = "sslpv-calibrated-mapping"', 'format = "other"'), "format"),
+    (GOOD.replace("sigma_scale = 1.5", "sigma_scale = -1.0"), "budget[0].sigma_scale"),
+    (GOOD.replace("sigma_scale = 1.5", 'sigma_scale = "big"'), "budget[0].sigma_scale"),
+    (GOOD.replace("radiance_scale = 0.8", "radiance_scale = nan"), "budget[0].radiance_scale"),
+    (GOOD.replace("N = 32\nsteps = 8", "N = 2\nsteps = 8"), "budget[0].N"),
+    (GOOD.replace("steps = 8", 'steps = "forever"'), "budget[0].steps"),
+    (GOOD.replace("steps = 8", 'steps = "steady"'), "budget[1]"),
+    (GOOD.replace("sigma_scale_se = 0.01", "sigma_scale_se = -0.01"), "budget[1].sigma_scale_se"),
+    (GOOD.replace("radiance_scale = 0.8", "radiance_scale = 0.8\ncolour = 1"), "budget[0].colour"),
+    ("extra = 1\n" + GOOD, "extra"),
+    ('format = "sslpv-calibrated-mapping"\nversion = 1\nfamily = "diffusion"\n', "budget"),
+    ("this is = = not toml", "toml"),
+    (b"\xff\xfe\x00binary", "toml"),
+])
+def test_bad_file_is_one_line(tmp_path, text, field):
+    p = write(tmp_path, text)
+    with pytest.raises(InputError) as exc:
+        load_calibrated(p, FAMILIES)
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith(f"{p}: {field}:") and "calibrate" in msg
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        load_calibrated(tmp_path / "none.toml", FAMILIES)
+    with pytest.raises(InputError, match="is not a file"):
+        load_calibrated(tmp_path, FAMILIES)
+
+
+def test_missing_budget_names_the_ones_there_are(tmp_path):
+    cal = load_calibrated(write(tmp_path, GOOD), FAMILIES)
+    with pytest.raises(InputError, match=r"no parameter set for N=16 steps=8.*N=32 steps=8, N=32 steps=steady"):
+        cal.budget(16, 8)
