@@ -114,15 +114,16 @@ def run(ctx, progs, grid, steps, skip, on_step=None):
     """
     for prog in progs.values():
         _sh.set_uniform(prog, "u_N", grid.N)
-    for unit, t in enumerate(grid.material):
-        t.use(3 + unit)
     if steps <= skip:                                   # nothing accumulated
         clear(grid.accum, grid)
     src, dst = grid.prop_a, grid.prop_b
     step = 0
     for step in range(1, steps + 1):
         acc = ACC_NONE if step <= skip else (ACC_FIRST if step == skip + 1 else ACC_ADD)
-        for unit, t in enumerate(grid.accum):           # rebound each step: a callback may shade in between
+        # rebound each step: a callback may shade (and scale) in between, using the same units
+        for unit, t in enumerate(grid.material):
+            t.use(3 + unit)
+        for unit, t in enumerate(grid.accum):
             t.bind_to_image(3 + unit, read=True, write=True)
         for unit, t in enumerate(src):
             t.use(unit)

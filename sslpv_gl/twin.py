@@ -21,7 +21,7 @@ Stages
      - Sec. 3.2, Eq. 3, Sec. 4
      - transfer rule of ``docs/conventions.md``; accumulate steps ``k > skip``;
        ``emit`` (0/1 per cell) makes sink cells (``sslpv_gl.boundary``)
-   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False)``
+   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False, radiance_scale=None)``
      - Sec. 3.3, Eq. 4-7
      - ``"cell"`` or ``"trilinear"`` coefficient lookup; ``eta2`` adds the
        ``1/eta^2`` radiance factor (not in the paper)
@@ -214,7 +214,7 @@ def sample_trilinear(grid, points, bbox_min, bbox_max):
 
 
 def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0,
-                 view_dirs=None, eta2=False):
+                 view_dirs=None, eta2=False, radiance_scale=None):
     """Subsurface radiance leaving surface points (Sec. 3.3) -> (P, 3) float64.
 
     Eq. 4 with the area-light estimate of Eq. 5-7 in the two-band form of
@@ -226,9 +226,13 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
     interpolates them (:func:`sample_trilinear`). ``eta2=True`` divides the
     result by ``eta^2`` (radiance compression leaving a medium of index
     ``eta``, which Mitsuba applies and the paper's Eq. 4 does not; no effect
-    when ``eta == 1``).
+    when ``eta == 1``). ``radiance_scale`` (N,N,N,3), default 1, multiplies
+    each cell's coefficients before the lookup (``docs/diffusion_mapping.md``
+    Eq. (21); a calibrated global factor), as ``scale.comp`` does.
     """
     accum = np.asarray(accum, dtype=np.float64)
+    if radiance_scale is not None:
+        accum = accum * np.asarray(radiance_scale, dtype=np.float64)[..., None]
     N = accum.shape[0]
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
