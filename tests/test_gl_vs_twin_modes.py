@@ -150,3 +150,16 @@ class TestStepModes:
         res = gl_renderer.render(scene, SSLPVParams(N=16, steps="auto", converge_tol=1e-9, max_steps=12,
                                                     rsm_size=256, inject_size=64))
         assert res.steps_used == 12 and any("not converged" in w for w in res.warnings)
+
+    @pytest.mark.parametrize("kw", [dict(outside="absorb"), dict(mapping="diffusion", outside="extrapolated", skip=0)])
+    def test_steady_matches_iterated_twin(self, gl_renderer, kw):
+        scene = load_scene("absorbing_sphere").with_resolution(32, 32)
+        params = SSLPVParams(N=16, steps="steady", rsm_size=256, inject_size=64, **kw)
+        res = gl_renderer.render(scene, params)
+        assert res.steps_used is None and res.diagnostics["outside_share"] < 1.0
+        accum = gl_renderer.read_accumulation(params)
+        mat = gl_renderer.lpv_material(scene, params)
+        c0 = _twin_c0(gl_renderer, scene, params)
+        _, ref = twin.propagate(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], _dx(scene, params.N),
+                                1200, params.skip, emit=mat["emit"])
+        _check_grid(accum, ref, f"steady {kw}")

@@ -1,0 +1,174 @@
+"""Where SSLPV's light goes, and how the error behaves as the grid is refined (issue 9, parts 3-5).
+
+Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot for ``refine``):
+
+``outside``
+    Per suite scene, mapping and outside mode (``sslpv_gl.boundary``), at N = 32: the share of the
+    accumulated energy (sum of |c00| of the accumulation grid) that sits in cells outside the mesh,
+    and the fraction of the injected flux still propagating, after K = 64 steps and at convergence
+    (``steps = auto``, tolerance 1e-3).
+``gap``
+    How far SSLPV at the paper's budgets (K = 8, 16, 32, 64) stays from its own converged result:
+    the factor E(converged) / E(K) on the subsurface image's energy, per scene and mapping, beside
+    the factors 3, 2 and 1.2 the paper's Fig. 8 applies by hand at 8, 16 and 32 steps.
+``refine``
+    Subsurface relMSE and energy ratio against the committed 64x64 references, at N = 16, 32, 64
+    with converged steps, for every index-matched suite scene and every mapping. The noise floor
+    is the same metric between the reference's two halves.
+
+Run: ``.venv/bin/python benchmarks/sslpv_light_budget.py --part outside --out reports/light_budget``
+(``--part all`` runs the three; ``--scenes a,b`` and ``--grids 16,32`` narrow them).
+"""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+
+MAPPINGS = ("literal", "collision", "diffusion")
+PAPER_FACTORS = {8: 3.0, 16: 2.0, 32: 1.2, 64: 1.0}
+
+
+def _setup(p, scene):
+    """Each mapping's own recommended setup for an absolute image: diffusion with skip 0."""
+    return dict(skip=0) if p == "diffusion" else {}
+
+
+def part_outside(renderer, scenes, out):
+    from harness.scene import load_scene
+    from sslpv_gl.boundary import OUTSIDE_MODES
+    from sslpv_gl.params import SSLPVParams
+
+    rows = []
+    print(f"{'scene':<20} {'mapping':<10} {'outside':<13} {'share@64':>9} {'left@64':>8} {'K conv':>7} "
+          f"{'share conv':>10}")
+    for name in scenes:
+        scene = load_scene(name).with_resolution(64, 64)
+        for m in MAPPINGS:
+            for mode in OUTSIDE_MODES:
+                p = SSLPVParams(N=32, steps=64, mapping=m, outside=mode, **_setup(m, scene))
+                k64 = renderer.render(scene, p, diagnostics=True).diagnostics
+                conv = renderer.render(scene, p.replace(steps="auto", max_steps=2048)).diagnostics
+                row = {"scene": name, "mapping": m, "outside": mode, "share_64": k64["outside_share"],
+                       "remaining_64": k64["remaining_fraction"], "steps_converged": conv["steps_used"],
+                       "share_converged": conv["outside_share"], "remaining_converged": conv["remaining_fraction"]}
+                rows.append(row)
+                print(f"{name:<20} {m:<10} {mode:<13} {row['share_64']:9.3f} {row['remaining_64']:8.3f} "
+                      f"{row['steps_converged']:7d} {row['share_converged']:10.3f}")
+    return rows
+
+
+def part_gap(renderer, scenes, out, outside_modes=("vacuum", "absorb")):
+    from harness.scene import load_scene
+    from sslpv_gl.params import SSLPVParams
+
+    rows = []
+    print(f"{'scene':<20} {'mapping':<10} {'outside':<8} " + " ".join(f"{'x@' + str(k):>7}" for k in PAPER_FACTORS)
+          + f" {'K conv':>7}")
+    print(f"{'paper Fig. 8':<40} " + " ".join(f"{v:7.2f}" for v in PAPER_FACTORS.values()))
+    for name in scenes:
+        scene = load_scene(name).with_resolution(64, 64)
+        for m in MAPPINGS:
+            for mode in outside_modes:
+                base = SSLPVParams(N=32, mapping=m, outside=mode, **_setup(m, scene))
+                conv = renderer.render(scene, base.replace(steps="auto", max_steps=2048))
+                e_conv = float(conv.subsurface[conv.mask].sum())
+                group = renderer.render_steps(scene, base, list(PAPER_FACTORS))
+                factors = {k: e_conv / max(float(r.subsurface[r.mask].sum()), 1e-30)
+                           for k, r in zip(PAPER_FACTORS, group)}
+                rows.append({"scene": name, "mapping": m, "outside": mode, "factors": factors,
+                             "steps_converged": conv.steps_used})
+                print(f"{name:<20} {m:<10} {mode:<8} " + " ".join(f"{factors[k]:7.2f}" for k in PAPER_FACTORS)
+                      + f" {conv.steps_used:7d}")
+    return rows
+
+
+def part_refine(renderer, scenes, out, grids=(16, 32, 64), outside="absorb"):
+    from harness.metrics import compute
+    from harness.regression.accuracy import load_case_reference
+    from harness.scene import load_scene
+    from sslpv_gl.params import SSLPVParams
+
+    rows = []
+    print(f"{'scene':<20} {'mapping':<10} " + " ".join(f"{'relMSE N' + str(n):>13}" for n in grids)
+          + " " + " ".join(f"{'E/E N' + str(n):>9}" for n in grids) + f" {'floor':>8}")
+    for name in scenes:
+        scene = load_scene(name).with_resolution(64, 64)
+        if scene.boundary.kind != "index-matched":
+            continue
+        ref, floors = load_case_reference(scene)
+        floor = floors["subsurface"]["relmse"]
+        for m in MAPPINGS:
+            rel, er, steps = {}, {}, {}
+            for n in grids:
+                p = SSLPVParams(N=n, steps="auto", max_steps=4096, mapping=m, outside=outside, **_setup(m, scene))
+                res = renderer.render(scene, p)
+                rel[n] = float(compute("relmse", res.subsurface, ref["subsurface"], ref["mask"]).value)
+                er[n] = float(compute("energy_ratio", res.subsurface, ref["subsurface"], ref["mask"]).value)
+                steps[n] = res.steps_used
+            rows.append({"scene": name, "mapping": m, "outside": outside, "relmse": rel, "energy_ratio": er,
+                         "steps": steps, "noise_floor_relmse": floor})
+            print(f"{name:<20} {m:<10} " + " ".join(f"{rel[n]:13.4g}" for n in grids) + " "
+                  + " ".join(f"{er[n]:9.3f}" for n in grids) + f" {floor:8.2g}")
+    _plot_refine(rows, grids, out / "refine.png")
+    return rows
+
+
+def _plot_refine(rows, grids, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from harness.io.atomic import atomic_write
+
+    scenes = sorted({r["scene"] for r in rows})
+    fig, axes = plt.subplots(1, max(len(scenes), 1), figsize=(3.2 * max(len(scenes), 1), 3.0), squeeze=False)
+    for ax, s in zip(axes[0], scenes):
+        for r in rows:
+            if r["scene"] == s:
+                ax.loglog(grids, [r["relmse"][n] for n in grids], "o-", label=r["mapping"])
+                floor = r["noise_floor_relmse"]
+        ax.axhline(floor, color="grey", ls=":", label="noise floor")
+        ax.set_title(s, fontsize=9)
+        ax.set_xlabel("N")
+        ax.set_xticks(grids, [str(n) for n in grids])
+    axes[0][0].set_ylabel("subsurface relMSE (converged)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_write(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    from harness.io.atomic import atomic_write
+    from harness.scene import list_scenes
+    from sslpv_gl.renderer import SSLPVRenderer
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", choices=["outside", "gap", "refine", "all"], default="all")
+    ap.add_argument("--scenes", help="comma-separated scene names (default: the suite)")
+    ap.add_argument("--grids", default="16,32,64", help="refine: grid resolutions")
+    ap.add_argument("--out", type=Path, default=Path("reports/light_budget"))
+    args = ap.parse_args(argv)
+    scenes = args.scenes.split(",") if args.scenes else list_scenes()
+    args.out.mkdir(parents=True, exist_ok=True)
+    renderer = SSLPVRenderer()
+    print(f"GL renderer: {renderer.gl_renderer}")
+    parts = ["outside", "gap", "refine"] if args.part == "all" else [args.part]
+    for part in parts:
+        t0 = time.perf_counter()
+        print(f"\n== {part}")
+        if part == "refine":
+            rows = part_refine(renderer, scenes, args.out, tuple(int(x) for x in args.grids.split(",")))
+        else:
+            rows = {"outside": part_outside, "gap": part_gap}[part](renderer, scenes, args.out)
+        with atomic_write(args.out / f"{part}.json") as tmp:
+            Path(tmp).write_text(json.dumps(rows, indent=1, default=str))
+        print(f"({part}: {time.perf_counter() - t0:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,592 @@
+"""SSLPV propagation as a linear operator: its steady state, and steps until convergence.
+
+Borlum et al. (HPG 2011) propagate light by repeating one step (Sec. 3.2,
+Eq. 3, Sec. 4) and summing the propagation grid into the accumulation grid.
+One step is linear in the grid, ``c_{k+1} = P c_k``, so after ``K`` steps
+with the first ``skip`` left out (Sec. 4, "first two steps")::
+
+    accum_K = sum_{k=skip+1}^{K} P^k c0                                  (S1)
+
+and the converged grid the paper waits for ("the propagation grid is empty",
+Sec. 3.2) is the Neumann series::
+
+    accum_inf = sum_{k>skip} P^k c0 = (I - P)^{-1} P^{skip+1} c0         (S2)
+
+which exists when the spectral radius ``rho(P) < 1``. This module builds
+``P`` as a sparse matrix, solves (S2) with a Krylov method, and offers the
+iterated alternative that stops when the light is gone.
+
+The transfer rule is the one of ``docs/conventions.md`` (and of
+:func:`sslpv_gl.twin.propagate`); for a destination ``d`` and its six
+neighbours ``s``::
+
+    c_d += M_s @ (exp(-0.5 (sigma_lpv[s] + sigma_lpv[d]) dx_axis) * S(s) c_s)
+
+``S(s) = diag(1, k1, k1, k1)``, ``k1 = (1 - sp[s]) + sp[s] g[s]`` (Eq. 3 on
+the SOURCE cell), ``M_s`` = :func:`sslpv_gl.sh.propagation_matrices` (Sec. 4),
+nothing enters from outside the grid. Colours are independent.
+
+Functions
+---------
+
+.. list-table::
+   :header-rows: 1
+
+   * - function
+     - paper
+     - result
+   * - ``transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)``
+     - Eq. 3, Sec. 4
+     - list of 3 ``scipy.sparse.csr_matrix`` ``(4 N^3, 4 N^3)``, one per colour
+   * - ``steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, ...)``
+     - Sec. 3.2 ("convergence"), Sec. 4 (skip)
+     - ``(accum, info)``: (S2), ``accum`` float64 ``(N, N, N, 3, 4)``
+   * - ``propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, ...)``
+     - Sec. 3.2, Sec. 4
+     - ``(accum, steps_used, remaining_fraction)``: (S1) with ``K`` chosen
+       by the remaining flux
+   * - ``spectral_radius(P)``
+     -
+     - ``rho(P)`` estimated with ARPACK
+   * - ``remaining_fraction(c, c0)``
+     -
+     - the stopping measure of ``propagate_until`` (below)
+
+Parameters
+----------
+
+.. list-table::
+   :header-rows: 1
+
+   * - parameter
+     - default
+     - meaning, limits
+   * - ``c0``
+     - (required)
+     - injected grid ``(N, N, N, 3, 4)`` ``[z, y, x, colour, coeff]``,
+       coefficients ``(c00, c1-1, c10, c11)``; finite
+   * - ``sigma_lpv``, ``sigma_s_prime``, ``g``
+     - (required)
+     - per-cell material, each broadcastable to ``(N, N, N, 3)``; finite.
+       Any values are accepted (the twin accepts them), but the series (S2)
+       only exists when ``rho(P) < 1``, which is checked
+   * - ``dx``
+     - (required)
+     - cell width, scalar or ``(dx, dy, dz)``; finite, > 0
+   * - ``skip``
+     - ``2``
+     - steps not accumulated (paper Sec. 4), integer >= 0
+   * - ``matrices``
+     - ``propagation_matrices()``
+     - ``(6, 4, 4)`` Sec. 4 matrices; entries below ``1e-12 max|M|`` (the
+       quadrature's ``1e-18`` noise where the paper prints 0) are dropped
+   * - ``rtol`` (``steady_state``)
+     - ``1e-8``
+     - Krylov relative residual ``||(I-P)x - b|| / ||b||``, in (0, 1). The
+       error of ``x`` is at most ``||(I-P)^{-1}||`` times the residual; with
+       ``1e-8`` the max-norm error was <= 1e-8 of max c00 in every measured
+       case (``tests/test_steady.py``; ``benchmarks/bench_steady.py``: 4e-9,
+       1e-8, 7e-9 at N = 16, 32, 64)
+   * - ``method`` (``steady_state``)
+     - ``"bicgstab"``
+     - ``"bicgstab"`` or ``"gmres"`` (restart 50); see "Solver" below
+   * - ``maxiter`` (``steady_state``)
+     - ``5000``
+     - Krylov iterations per colour before giving up (``ValueError``)
+   * - ``check_spectrum`` (``steady_state``)
+     - ``True``
+     - estimate ``rho(P)`` per colour and raise ``ValueError`` if >= 1
+   * - ``tol`` (``propagate_until``)
+     - ``1e-3``
+     - stop when ``remaining_fraction < tol``, in (0, 1)
+   * - ``max_steps`` (``propagate_until``)
+     - ``4096``
+     - cap on ``K``, integer >= ``skip``
+
+Ordering of the operator
+------------------------
+Per colour, the unknown for cell ``[z, y, x]`` and coefficient ``a`` is row
+``4 * ((z * N + y) * N + x) + a``, i.e. ``grid[..., colour, :].reshape(-1)``
+of a C-ordered ``(N, N, N, 3, 4)`` grid. ``P[4d + a, 4s + b] = M_s[a, b] *
+exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
+
+Solver
+------
+``P`` couples only face neighbours, whose parities ``(x + y + z) % 2``
+differ, so in red/black order ``P = [[0, P_rb], [P_br, 0]]`` and
+``(I - P) x = b`` reduces exactly to the half-size system
+``(I - P_br P_rb) x_b = b_b + P_br b_r``, ``x_r = b_r + P_rb x_b`` (block
+elimination; no approximation). The eigenvalues of ``P`` come in ``+-``
+pairs, which the reduced operator folds onto one (``rho(P_br P_rb) =
+rho(P)^2``). Measured on a sphere like that of ``benchmarks/bench_steady.py``
+at N = 32 (one colour, rtol 1e-8, one core): BiCGSTAB needed 76 iterations
+(0.70 s) on ``I - P`` and 37 (0.20 s) on the reduced system, GMRES(30) 189
+and 84. An incomplete LU of the reduced matrix (``spilu``, drop 1e-2) cut
+BiCGSTAB to 13 iterations but took 16 s to build, so no further
+preconditioner is used. BiCGSTAB was 2-3x faster than GMRES(50-60) at N = 32
+and 64 (GMRES's orthogonalisation dominates at these sizes), hence the
+default.
+
+Convergence check
+-----------------
+When ``rho(P) >= 1`` the series (S2) diverges although ``I - P`` may still be
+invertible, so a Krylov solve would return a finite but meaningless grid.
+``steady_state`` therefore estimates ``rho(P)`` per colour with ARPACK
+(``eigs`` of ``P_br P_rb``, largest modulus, ``tol=1e-3``, which put
+``rho`` within 5e-6 of a ``tol=1e-6`` run at N = 32 and 64; 20-35 operator
+products, a third to a half of a solve's) and raises ``ValueError`` when it is
+>= 1. For physical material (``sigma_lpv >= 0``, ``|k1| <= 1``) the symbol
+of ``P`` on the infinite lattice has radius <= 1 (= 1 only at wavenumber 0
+and at the checkerboard mode, flux conservation; ``tests/test_steady.py``)
+and the grid boundary lets light escape, so ``rho(P) < 1`` is expected, and
+was found in every case tried; but without absorption ``rho`` approaches 1
+as ``N`` grows, ``1 - rho ~ 3 pi^2 D / N^2`` with ``D`` ~ 0.16-0.21 cell^2
+per step (measured in an all-vacuum grid: ``1 - rho`` = 0.0048 at N = 32,
+``k1`` = 0.3), and the solve needs more iterations, giving up with
+``ValueError`` after ``maxiter``. Negative ``sigma_lpv`` (a gain) can still
+leave ``rho < 1`` when the boundary leaks more than it adds; only ``rho``
+decides.
+
+Stopping measure of ``propagate_until``
+----------------------------------------
+The flux of a cell's intensity is ``int I dw = sqrt(4 pi) c00``. The
+remaining fraction after step ``k`` is, per colour,
+``sum_cells |c00_k| / sum_cells |c00_0|`` (the ``sqrt(4 pi)`` cancels;
+absolute values because two-band lobes can carry negative ``c00`` in
+places, and a net sum could cancel to zero while light is still moving), and
+the reported value is its maximum over the colours that received any flux.
+Note that a remaining fraction ``f`` still owes the accumulation about
+``f / (1 - rho)`` of the injected flux, so ``tol`` bounds the light still in
+flight, not the error of ``accum``. On the sphere of
+``benchmarks/bench_steady.py`` the remaining fraction was 2.7e-4, 3.4e-4 and
+4.4e-4 (N = 16, 32, 64) at the first step whose accumulation was within
+1e-4 of max c00 of the steady state, so ``tol = 2e-4`` gives about that
+accuracy there, and the default ``1e-3`` somewhat less.
+
+Limits
+------
+* Memory: ``P`` has 36 stored entries per cell and colour (9.4 M at
+  ``N = 64``, ~110 MB per colour in CSR); ``N = 128`` needs ~0.9 GB per
+  colour and was not measured.
+* Float64 throughout (the GL renderer stores fp32/fp16).
+* ``propagate_until`` applies ``P`` step by step with the sparse operator
+  (same rule as the twin to ~1e-16 per step, faster); its cost is the
+  number of steps times one sparse product per colour.
+"""
+
+from __future__ import annotations
+
+import inspect
+import numbers
+import time
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .sh import SOURCE_OFFSETS, propagation_matrices, scatter_factors
+
+__all__ = [
+    "transfer_operator",
+    "steady_state",
+    "propagate_until",
+    "spectral_radius",
+    "remaining_fraction",
+]
+
+_METHODS = ("bicgstab", "gmres")
+# scipy < 1.12 calls the relative tolerance `tol` (the project allows scipy >= 1.11)
+_RTOL = "rtol" if "rtol" in inspect.signature(spla.bicgstab).parameters else "tol"
+_GMRES_RESTART = 50
+_DENSE_EIG_MAX = 512           # reduced systems up to this size use dense eigvals
+_DROP = 1e-12                  # relative size below which matrix entries are quadrature noise
+
+
+# ------------------------------------------------------------------ inputs
+
+def _bad(field, problem, fix):
+    # one line: "<setting>: <field>: <problem>; <fix>" (docs/conventions.md)
+    raise ValueError(f"sslpv_gl.steady: {field}: {problem}; {fix}")
+
+
+def _finite(name, a):
+    if not np.all(np.isfinite(a)):
+        _bad(name, "contains NaN or Inf", "pass finite values")
+    return a
+
+
+def _material(sigma_lpv, sigma_s_prime, g, N):
+    shape = (N, N, N, 3)
+    out = []
+    for name, a in (("sigma_lpv", sigma_lpv), ("sigma_s_prime", sigma_s_prime), ("g", g)):
+        a = np.asarray(a, dtype=np.float64)
+        try:
+            a = np.broadcast_to(a, shape)
+        except ValueError:
+            _bad(name, f"shape {a.shape} does not broadcast to {shape}", "pass (N, N, N, 3) or a scalar")
+        out.append(_finite(name, a))
+    return out
+
+
+def _grid_size(*arrays):
+    """N from the first material array with at least 3 dimensions."""
+    for a in arrays:
+        a = np.asarray(a)
+        if a.ndim >= 3:
+            if not a.shape[0] == a.shape[1] == a.shape[2] >= 1:
+                _bad("sigma_lpv", f"shape {a.shape} is not (N, N, N, ...)", "pass a cubic grid")
+            return int(a.shape[0])
+    _bad("sigma_lpv", "no material array has a grid shape", "pass (N, N, N, 3) arrays")
+
+
+def _dx(dx):
+    d = np.asarray(dx, dtype=np.float64)
+    try:
+        d = np.broadcast_to(d, (3,)).copy()
+    except ValueError:
+        _bad("dx", f"shape {d.shape} is not scalar or (3,)", "pass the cell width or (dx, dy, dz)")
+    if not np.all(np.isfinite(d)) or np.any(d <= 0):
+        _bad("dx", f"must be finite and > 0, got {dx!r}", "pass the cell width")
+    return d
+
+
+def _c0(c0):
+    c = np.asarray(c0, dtype=np.float64)
+    if c.ndim != 5 or c.shape[3:] != (3, 4) or not c.shape[0] == c.shape[1] == c.shape[2]:
+        _bad("c0", f"shape {c.shape} is not (N, N, N, 3, 4)", "pass an SH grid [z, y, x, colour, coeff]")
+    return _finite("c0", c)
+
+
+def _skip(skip):
+    if isinstance(skip, bool) or not isinstance(skip, (int, np.integer)) or skip < 0:
+        _bad("skip", f"must be an integer >= 0, got {skip!r}", "pass e.g. 2 (paper Sec. 4)")
+    return int(skip)
+
+
+# ---------------------------------------------------------------- operator
+
+def _slices(offset):
+    """(destination, source) slices of a [z, y, x] array for a source at ``d + offset``."""
+    src = [slice(None)] * 3
+    dst = [slice(None)] * 3
+    for axis_xyz, o in enumerate(offset):
+        ax = 2 - axis_xyz                    # array axis of x, y, z
+        if o > 0:
+            src[ax], dst[ax] = slice(o, None), slice(None, -o)
+        elif o < 0:
+            src[ax], dst[ax] = slice(None, o), slice(-o, None)
+    return tuple(dst), tuple(src)
+
+
+def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None):
+    """One propagation step (Sec. 3.2, Eq. 3, Sec. 4) as sparse matrices, one per colour.
+
+    Returns a list of three ``scipy.sparse.csr_matrix`` of shape
+    ``(4 N^3, 4 N^3)`` such that, per colour ``col``,
+    ``(P[col] @ c[..., col, :].reshape(-1)).reshape(N, N, N, 4)`` is one step
+    of :func:`sslpv_gl.twin.propagate` (module docstring: ordering and entry
+    formula). Material arrays broadcast to ``(N, N, N, 3)``; ``N`` is taken
+    from the first of them that has three or more dimensions. ``dx`` is a
+    scalar or ``(dx, dy, dz)``; the step along an axis uses that axis' width.
+    ``emit`` (default 1) multiplies what each SOURCE cell sends on: 0 makes a
+    sink cell (:mod:`sslpv_gl.boundary`), as in :func:`sslpv_gl.twin.propagate`.
+
+    All three matrices share one sparsity pattern (36 entries per cell away
+    from the boundary). It is built once, vectorised, directly in CSR order
+    (destination cell, row coefficient, source, column coefficient: no sort);
+    each colour's ``data`` is then two gathers.
+    """
+    N = _grid_size(sigma_lpv, sigma_s_prime, g)
+    sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
+    em = _material(1.0 if emit is None else emit, 0.0, 0.0, N)[0]
+    dxs = _dx(dx)
+    mats = propagation_matrices() if matrices is None else np.asarray(matrices, dtype=np.float64)
+    if mats.shape != (6, 4, 4):
+        _bad("matrices", f"shape {mats.shape} is not (6, 4, 4)", "pass propagation_matrices()")
+    _finite("matrices", mats)
+    k1 = scatter_factors(spr, gg)[..., 1]    # Eq. 3, band 1 of the SOURCE cell; band 0 is 1
+    drop = _DROP * max(float(np.abs(mats).max()), np.finfo(float).tiny)
+    n_cells = N ** 3
+    cells = np.arange(n_cells, dtype=np.int64).reshape(N, N, N)
+
+    # Entries are laid out [destination cell, row coefficient a, source s, column
+    # coefficient b], which is CSR row order; sources ordered -z, -y, -x, +x, +y, +z
+    # have ascending cell numbers, so the column indices come out sorted too.
+    order = [5, 3, 1, 0, 2, 4]
+    src_cell = np.full((n_cells, 6), -1, dtype=np.int64)
+    att = np.zeros((n_cells, 6, 3))
+    k1_src = np.zeros((n_cells, 6, 3))
+    for j, s in enumerate(order):
+        offset = SOURCE_OFFSETS[s]
+        dst, src = _slices(offset)
+        axis = int(np.flatnonzero(offset)[0])
+        src_cell[cells[dst].ravel(), j] = cells[src].ravel()
+        # half the path lies in each cell (conventions: mean of source and destination)
+        att[cells[dst].ravel(), j] = (np.exp(-0.5 * (sig[src] + sig[dst]) * dxs[axis]) * em[src]).reshape(-1, 3)
+        k1_src[cells[dst].ravel(), j] = k1[src].reshape(-1, 3)
+    m = mats[order].transpose(1, 0, 2)                       # (a, s, b)
+    keep = (np.abs(m) > drop)[None] & (src_cell >= 0)[:, None, :, None]   # (cell, a, s, b)
+    kept = np.flatnonzero(keep.ravel())
+    n = 4 * n_cells
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(keep.reshape(n, -1).sum(axis=1), out=indptr[1:])
+    del keep
+    # decompose the kept positions once; every colour then needs two gathers
+    cell, rest = np.divmod(kept, 96)
+    a_sb = rest % 24                                         # (s, b) within the row
+    m_idx = rest                                             # (a, s, b) in m
+    csb = cell * 24 + a_sb                                   # (cell, s, b) of the factor below
+    del kept, rest
+    indices = (4 * src_cell.ravel()[cell * 6 + a_sb // 4] + a_sb % 4).astype(np.int32)
+    del cell, a_sb
+    idx_dtype = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
+    indptr = indptr.astype(idx_dtype)
+    indices = indices.astype(idx_dtype, copy=False)
+    m_flat = m.ravel()[m_idx]
+    del m_idx
+    out = []
+    for col in range(3):
+        # band 0 leaves the source unscaled, band 1 is scaled by the source's k1 (Eq. 3)
+        factor = np.empty((n_cells, 6, 4))
+        factor[:, :, 0] = att[:, :, col]
+        factor[:, :, 1:] = (att[:, :, col] * k1_src[:, :, col])[:, :, None]
+        mat = sp.csr_matrix((m_flat * factor.ravel()[csb], indices, indptr), shape=(n, n))
+        mat.has_sorted_indices = True
+        out.append(mat)
+    return out
+
+
+def _red_black(N):
+    """Row indices of the even and odd cells ((x + y + z) % 2), 4 coefficients each."""
+    z, y, x = np.meshgrid(*(np.arange(N),) * 3, indexing="ij")
+    par = np.repeat(((x + y + z) % 2).ravel(), 4)
+    return np.flatnonzero(par == 0), np.flatnonzero(par == 1)
+
+
+class _Split:
+    """``P`` in red/black blocks; ``reduced`` applies ``P_br P_rb`` (two half products)."""
+
+    def __init__(self, P, red, black):
+        self.red, self.black = red, black
+        Pr = P[red]
+        Pb = P[black]
+        self.P_rb = Pr[:, black].tocsr()     # red rows, black columns
+        self.P_br = Pb[:, red].tocsr()
+        self.products = 0                    # counts of P_br P_rb, ~ one full P product each
+
+    def reduced(self, y):
+        self.products += 1
+        return self.P_br @ (self.P_rb @ y)
+
+
+def spectral_radius(P, tol=1e-3, _split=None):
+    """Spectral radius of one colour's transfer operator ``P`` (ARPACK, or dense when small).
+
+    Uses ``rho(P) = sqrt(rho(P_br P_rb))`` (module docstring, "Solver"): the
+    reduced operator has no ``+-`` pairs, so ARPACK's largest-modulus Ritz
+    value converges in one or two restarts. The start vector is a seeded
+    random one, so no symmetry of the scene hides the dominant mode.
+    Returns a float.
+    """
+    n = P.shape[0]
+    if _split is None:
+        N = round((n // 4) ** (1.0 / 3.0))
+        _split = _Split(P, *_red_black(N))
+    m = _split.black.size
+    if m == 0:
+        return 0.0
+    if m <= _DENSE_EIG_MAX:
+        Q = (_split.P_br @ _split.P_rb).toarray()
+        return float(np.sqrt(np.abs(np.linalg.eigvals(Q)).max()))
+    op = spla.LinearOperator((m, m), matvec=_split.reduced, dtype=np.float64)
+    v0 = np.random.default_rng(12345).random(m) + 0.5
+    try:
+        w = spla.eigs(op, k=1, which="LM", tol=tol, ncv=min(20, m - 1), maxiter=200,
+                      v0=v0, return_eigenvectors=False)
+    except spla.ArpackNoConvergence as exc:
+        w = exc.eigenvalues
+        if w is None or len(w) == 0:
+            _bad("steady_state", "ARPACK could not estimate the spectral radius of the transfer operator",
+                 "pass check_spectrum=False to skip the check, or use propagate_until")
+    return float(np.sqrt(np.abs(w).max()))
+
+
+# ------------------------------------------------------------ steady state
+
+def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rtol=1e-8,
+                 method="bicgstab", maxiter=5000, check_spectrum=True, emit=None):
+    """Converged accumulation grid ``sum_{k>skip} P^k c0`` (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, info)``.
+
+    The paper's accumulation grid once "the propagation grid is empty"
+    (Sec. 3.2), with the first ``skip`` steps not accumulated (Sec. 4). The
+    first ``skip + 1`` steps are applied exactly, ``b = P^{skip+1} c0``; then
+    ``(I - P) x = b`` is solved per colour by BiCGSTAB or GMRES on the exact
+    red/black reduction (module docstring, "Solver"), so ``x = (I - P)^{-1}
+    b`` is the series (S2).
+
+    ``accum``: float64 ``(N, N, N, 3, 4)``. ``info``: dict with ``method``,
+    ``rtol``, per colour lists ``iterations`` (Krylov iterations),
+    ``products`` (applications of ``P``, the skip steps and the spectral
+    check included), ``residual`` (true ``||(I-P)x - b|| / ||b||`` on the full
+    system), ``rho`` (spectral radius estimate, ``None`` unchecked), and
+    ``time`` (seconds: ``operator`` (build and red/black split), ``spectrum``,
+    ``solve``, ``total``).
+
+    ``emit``: sink cells, as in :func:`transfer_operator`.
+
+    Raises ``ValueError`` (one line) on bad input, when ``rho(P) >= 1`` for a
+    colour that carries light (the series diverges: no steady state), or
+    when the solver does not reach ``rtol`` within ``maxiter`` iterations.
+    """
+    t_start = time.perf_counter()
+    c0 = _c0(c0)
+    N = c0.shape[0]
+    skip = _skip(skip)
+    if method not in _METHODS:
+        _bad("method", f"unknown method {method!r}", "use one of: " + ", ".join(_METHODS))
+    if not (isinstance(rtol, numbers.Real) and 0.0 < rtol < 1.0):
+        _bad("rtol", f"must be in (0, 1), got {rtol!r}", "pass e.g. 1e-8")
+    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
+        _bad("maxiter", f"must be an integer >= 1, got {maxiter!r}", "pass e.g. 5000")
+    sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
+
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
+    t_op = time.perf_counter() - t_start
+    red, black = _red_black(N)
+    accum = np.zeros_like(c0)
+    info = {"method": method, "rtol": float(rtol), "iterations": [], "products": [], "residual": [],
+            "rho": [], "time": {"operator": t_op, "spectrum": 0.0, "solve": 0.0}}
+    rho_cache = []                           # (P, rho): grey materials give equal operators
+    for col in range(3):
+        P = ops[col]
+        b = c0[..., col, :].reshape(-1)
+        for _ in range(skip + 1):            # the skipped steps and the first accumulated one, exactly
+            b = P @ b
+        if not np.any(b):
+            info["iterations"].append(0)
+            info["products"].append(skip + 1)
+            info["residual"].append(0.0)
+            info["rho"].append(None)
+            continue
+        t0 = time.perf_counter()
+        split = _Split(P, red, black)
+        info["time"]["operator"] += time.perf_counter() - t0
+
+        rho = None
+        if check_spectrum:
+            t0 = time.perf_counter()
+            for P_seen, r in rho_cache:
+                if P_seen.data.shape == P.data.shape and np.array_equal(P_seen.data, P.data):
+                    rho = r
+                    break
+            if rho is None:
+                rho = spectral_radius(P, _split=split)
+                rho_cache.append((P, rho))
+            info["time"]["spectrum"] += time.perf_counter() - t0
+            if rho >= 1.0:
+                _bad("steady_state", f"colour {col}: the transfer operator's spectral radius is {rho:.6g} >= 1, "
+                     "so the step series diverges and there is no steady state",
+                     "check sigma_lpv >= 0 and |k1| <= 1, or use a fixed step count")
+
+        t0 = time.perf_counter()
+        rhs = b[black] + split.P_br @ b[red]
+        # the red rows of the full residual vanish (x_r is formed exactly), its
+        # black rows are the reduced residual: scale rtol so that it bounds
+        # the full system's relative residual, as documented
+        rtol_reduced = float(rtol) * float(np.linalg.norm(b) / max(np.linalg.norm(rhs), np.finfo(float).tiny))
+        m = black.size
+        op = spla.LinearOperator((m, m), matvec=lambda y, s=split: y - s.reduced(y), dtype=np.float64)
+        iters = [0]
+
+        def count(*_args):
+            iters[0] += 1
+
+        if method == "bicgstab":
+            xb, flag = spla.bicgstab(op, rhs, **{_RTOL: rtol_reduced}, atol=0.0, maxiter=int(maxiter), callback=count)
+        else:
+            xb, flag = spla.gmres(op, rhs, **{_RTOL: rtol_reduced}, atol=0.0, restart=_GMRES_RESTART,
+                                  maxiter=max(1, int(maxiter) // _GMRES_RESTART + 1),
+                                  callback=count, callback_type="pr_norm")
+        x = np.empty_like(b)
+        x[black] = xb
+        x[red] = b[red] + split.P_rb @ xb
+        # check on the full system, independent of the solver's own estimate
+        res = float(np.linalg.norm(x - P @ x - b) / np.linalg.norm(b))
+        info["time"]["solve"] += time.perf_counter() - t0
+        if flag != 0 or not np.all(np.isfinite(x)) or not res <= 10.0 * rtol:
+            why = "broke down" if flag < 0 else f"did not converge in {iters[0]} iterations"
+            rho_txt = "unchecked" if rho is None else f"{rho:.8f}"
+            _bad("steady_state", f"colour {col}: {method} {why} (relative residual {res:.3g}, rtol {rtol:g}, "
+                 f"spectral radius {rho_txt}); the series converges too slowly or not at all",
+                 "add absorption, raise maxiter, or use propagate_until")
+        accum[..., col, :] = x.reshape(N, N, N, 4)
+        info["iterations"].append(int(iters[0]))
+        info["products"].append(skip + 1 + split.products + 2)
+        info["residual"].append(res)
+        info["rho"].append(rho)
+    info["time"]["total"] = time.perf_counter() - t_start
+    return accum, info
+
+
+# --------------------------------------------------------- steps until done
+
+def remaining_fraction(c, c0):
+    """Light still in the propagation grid ``c`` relative to the injected grid ``c0``.
+
+    Per colour ``sum |c00(c)| / sum |c00(c0)|`` (flux ``sqrt(4 pi) c00``, the
+    factor cancels); the maximum over colours whose ``c0`` carries flux, 0 if
+    none does. ``c``, ``c0``: ``(N, N, N, 3, 4)``.
+    """
+    c = np.asarray(c, dtype=np.float64)
+    c0 = np.asarray(c0, dtype=np.float64)
+    inj = np.abs(c0[..., 0]).sum(axis=(0, 1, 2))
+    now = np.abs(c[..., 0]).sum(axis=(0, 1, 2))
+    lit = inj > 0
+    if not np.any(lit):
+        return 0.0
+    return float((now[lit] / inj[lit]).max())
+
+
+def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=4096, skip=2, matrices=None,
+                    emit=None):
+    """Propagate until the light is gone (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, steps_used, remaining)``.
+
+    ``steps = auto``: apply the one-step operator (same rule as
+    :func:`sslpv_gl.twin.propagate`) and stop after the first step ``K >=
+    skip`` at which :func:`remaining_fraction` of the propagation grid is
+    below ``tol``, or at ``K = max_steps``. ``accum`` is the twin's
+    accumulation grid for ``K`` steps, ``sum_{k=skip+1}^{K} P^k c0``;
+    ``remaining`` is the fraction after step ``K`` (>= ``tol`` only when the
+    cap was reached; the caller decides whether that is acceptable).
+    """
+    c0 = _c0(c0)
+    N = c0.shape[0]
+    skip = _skip(skip)
+    if not (isinstance(tol, numbers.Real) and 0.0 < tol < 1.0):
+        _bad("tol", f"must be in (0, 1), got {tol!r}", "pass e.g. 1e-3")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < skip:
+        _bad("max_steps", f"must be an integer >= skip ({skip}), got {max_steps!r}", "raise max_steps")
+    sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
+
+    c = [c0[..., col, :].reshape(-1).copy() for col in range(3)]
+    inj = np.abs(c0[..., 0]).sum(axis=(0, 1, 2))
+    lit = [col for col in range(3) if inj[col] > 0]
+    acc = [np.zeros(4 * N ** 3) for _ in range(3)]
+
+    def fraction():
+        if not lit:
+            return 0.0
+        return max(float(np.abs(c[col][0::4]).sum() / inj[col]) for col in lit)
+
+    k = 0
+    remaining = fraction()
+    while k < int(max_steps) and (k < skip or remaining >= tol):
+        k += 1
+        for col in range(3):
+            c[col] = ops[col] @ c[col]
+            if k > skip:
+                acc[col] += c[col]
+        remaining = fraction()
+    accum = np.stack([a.reshape(N, N, N, 4) for a in acc], axis=3)
+    return accum, k, remaining
