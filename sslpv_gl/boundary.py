@@ -13,7 +13,11 @@ gives, per cell and colour, two masks used by the propagation's transfer rule
   (elsewhere both are 0: vacuum);
 * ``emit``: 1 where a cell passes on what it received, 0 where it is a *sink*
   that records what entered it (the accumulation grid still sums it, so shading
-  can read the escaped flux) but sends nothing on.
+  can read the escaped flux) but sends nothing on. Sinks act from the second
+  step on: the first step carries the injected light, which has crossed the
+  surface inwards even where the cell holding the surface point has its centre
+  outside the mesh (otherwise a thin object, whose lit cells are all
+  outside-centred, would lose all its light).
 
 Modes
 -----

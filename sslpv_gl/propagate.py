@@ -88,7 +88,7 @@ def upload_material(grid, material, dx):
     sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(shape)
     emit = np.broadcast_to(np.asarray(material.get("emit", 1.0), dtype=np.float64), shape)
     half = np.exp(-0.5 * sigma * float(dx))
-    for tex, arr in zip(grid.material, (half, half * k1 * emit, half * emit)):
+    for tex, arr in zip(grid.material, (half, half * k1 * emit, half * emit, half * k1)):
         tex.write(_rgba(arr))
     scale = np.broadcast_to(np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64), shape)
     scaled = bool(np.any(scale != 1.0))
@@ -121,7 +121,11 @@ def run(ctx, progs, grid, steps, skip, on_step=None):
     for step in range(1, steps + 1):
         acc = ACC_NONE if step <= skip else (ACC_FIRST if step == skip + 1 else ACC_ADD)
         # rebound each step: a callback may shade (and scale) in between, using the same units
-        for unit, t in enumerate(grid.material):
+        # units 3-5: u_half, u_hk1, u_h0; step 1 sends the injected light on from every cell
+        # (it has crossed the surface inwards), so it takes the source factors without emit
+        first = step == 1
+        for unit, t in enumerate((grid.material[0], grid.material[3] if first else grid.material[1],
+                                  grid.material[0] if first else grid.material[2])):
             t.use(3 + unit)
         for unit, t in enumerate(grid.accum):
             t.bind_to_image(3 + unit, read=True, write=True)

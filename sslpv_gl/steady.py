@@ -289,7 +289,8 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)
     from the first of them that has three or more dimensions. ``dx`` is a
     scalar or ``(dx, dy, dz)``; the step along an axis uses that axis' width.
     ``emit`` (default 1) multiplies what each SOURCE cell sends on: 0 makes a
-    sink cell (:mod:`sslpv_gl.boundary`), as in :func:`sslpv_gl.twin.propagate`.
+    sink cell (:mod:`sslpv_gl.boundary`), as in :func:`sslpv_gl.twin.propagate`
+    (whose first step, like :func:`steady_state`'s, uses the operator without sinks).
 
     All three matrices share one sparsity pattern (36 entries per cell away
     from the boundary). It is built once, vectorised, directly in CSR order
@@ -451,6 +452,8 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
 
     ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
+    # step 1 carries the injected light, which has crossed the surface inwards: every cell emits
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices)
     t_op = time.perf_counter() - t_start
     red, black = _red_black(N)
     accum = np.zeros_like(c0)
@@ -459,8 +462,8 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
     rho_cache = []                           # (P, rho): grey materials give equal operators
     for col in range(3):
         P = ops[col]
-        b = c0[..., col, :].reshape(-1)
-        for _ in range(skip + 1):            # the skipped steps and the first accumulated one, exactly
+        b = ops1[col] @ c0[..., col, :].reshape(-1)
+        for _ in range(skip):                # the skipped steps and the first accumulated one, exactly
             b = P @ b
         if not np.any(b):
             info["iterations"].append(0)
@@ -568,6 +571,7 @@ def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=409
         _bad("max_steps", f"must be an integer >= skip ({skip}), got {max_steps!r}", "raise max_steps")
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
     ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices)   # step 1: every cell emits
 
     c = [c0[..., col, :].reshape(-1).copy() for col in range(3)]
     inj = np.abs(c0[..., 0]).sum(axis=(0, 1, 2))
@@ -584,7 +588,7 @@ def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=409
     while k < int(max_steps) and (k < skip or remaining >= tol):
         k += 1
         for col in range(3):
-            c[col] = ops[col] @ c[col]
+            c[col] = (ops1 if k == 1 else ops)[col] @ c[col]
             if k > skip:
                 acc[col] += c[col]
         remaining = fraction()

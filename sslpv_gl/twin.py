@@ -147,7 +147,8 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
     ``matrices`` defaults to :func:`sslpv_gl.sh.propagation_matrices`.
     ``emit`` (N,N,N,3), default 1: a factor on what each SOURCE cell sends on;
     0 makes a sink that keeps (and accumulates) what it received but passes
-    nothing on (``outside = absorb`` / ``extrapolated``, :mod:`sslpv_gl.boundary`).
+    nothing on (``outside = absorb`` / ``extrapolated``, :mod:`sslpv_gl.boundary`),
+    from step 2 on: step 1 propagates the injected light from every cell.
     Returns float64 arrays of ``c0``'s shape.
     """
     c = np.asarray(c0, dtype=np.float64)
@@ -170,7 +171,9 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
 
     accum = np.zeros_like(c)
     for step in range(1, int(steps) + 1):
-        scattered = c * em[..., None]                # sinks send nothing on
+        # sinks send nothing on, except in step 1: the injected light has crossed the
+        # surface inwards, even where its cell's centre lies outside the mesh
+        scattered = c * (1.0 if step == 1 else em[..., None])
         scattered[..., 1:] *= k1[..., None]
         nxt = np.zeros_like(c)
         for s, offset in enumerate(SOURCE_OFFSETS):

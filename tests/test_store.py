@@ -63,12 +63,13 @@ class TestSchema:
         with Store(path) as st:
             st.start_run("sweep", {})
 
-        def migration_2(db):
+        def migration_next(db):
             db.execute("ALTER TABLE runs ADD COLUMN note TEXT")
 
-        monkeypatch.setattr(store_mod, "MIGRATIONS", store_mod.MIGRATIONS + [migration_2])
+        current = schema_version()
+        monkeypatch.setattr(store_mod, "MIGRATIONS", store_mod.MIGRATIONS + [migration_next])
         with Store(path) as st:
-            assert st.user_version == 2
+            assert st.user_version == current + 1
             assert "note" in st.runs()[0]
 
     def test_failed_migration_leaves_store_as_it_was(self, tmp_path, monkeypatch):
@@ -76,17 +77,53 @@ class TestSchema:
         with Store(path):
             pass
 
-        def migration_2(db):
+        def migration_next(db):
             db.execute("CREATE TABLE extra (x)")
             raise RuntimeError("boom")
 
-        monkeypatch.setattr(store_mod, "MIGRATIONS", store_mod.MIGRATIONS + [migration_2])
+        current = schema_version()
+        monkeypatch.setattr(store_mod, "MIGRATIONS", store_mod.MIGRATIONS + [migration_next])
         with pytest.raises(RuntimeError, match="boom"):
             Store(path)
         monkeypatch.undo()
         with Store(path) as st:
-            assert st.user_version == 1
+            assert st.user_version == current
             assert not st._read("SELECT name FROM sqlite_master WHERE name = 'extra'")
+
+    def test_store_of_migration_1_gains_the_v2_columns_and_keeps_its_rows(self, tmp_path, monkeypatch):
+        """A store written by migration 1 only (the harness before steps_used/diagnostics/calibration)."""
+        path = tmp_path / "old.sqlite"
+        monkeypatch.setattr(store_mod, "MIGRATIONS", store_mod.MIGRATIONS[:1])
+        with Store(path) as st:
+            assert st.user_version == 1
+            run = st.start_run("sweep", {})
+            cols = {r["name"] for r in st._read("PRAGMA table_info(configurations)")}
+            assert "steps_used" not in cols
+            with st._write() as db:   # the row that harness would have written (migration-1 columns only)
+                cid = db.execute("INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json,"
+                                 " status, created_at) VALUES (?,?,?,?,?,?,?)",
+                                 (run, "slab", "h", Store.config_key("h", {"grid": 32, "steps": 8}),
+                                  '{"grid":32,"steps":8}', "ok", "2025-01-01T00:00:00+00:00")).lastrowid
+                for stage, ms in TIMINGS.items():
+                    db.execute("INSERT INTO timings VALUES (?,?,?)", (cid, stage, ms))
+        monkeypatch.undo()
+        with Store(path) as st:
+            assert st.user_version == schema_version() >= 2
+            cols = {r["name"] for r in st._read("PRAGMA table_info(configurations)")}
+            assert {"steps_used", "diagnostics_json", "calibration_json", "shared_json"} <= cols
+            (old,) = st.configs()
+            assert old["params"] == {"grid": 32, "steps": 8} and old["timings"] == TIMINGS
+            assert old["steps_used"] is None and old["diagnostics"] is None and old["calibration"] is None
+            assert old["shared"] is None
+            # ... and the migrated store takes the new fields.
+            diag = {"steps_used": 16, "remaining_fraction": 0.25, "outside_share": 0.4,
+                    "injected_flux": [1.0, 2.0, 3.0]}
+            cal = {"path": "/cal/diffusion.toml", "sha256": "ab" * 32, "N": 32, "steps": 16}
+            st.record_config(run, "slab", "h", {"grid": 32, "steps": 16}, "ok", steps_used=16, diagnostics=diag,
+                             calibration=cal, shared={"stages": ["rsm", "injection"], "group_steps": [8, 16]})
+            new = st.configs()[-1]
+            assert (new["steps_used"], new["diagnostics"], new["calibration"]) == (16, diag, cal)
+            assert new["shared"] == {"stages": ["rsm", "injection"], "group_steps": [8, 16]}
 
     def test_newer_schema_is_refused_and_untouched(self, tmp_path):
         path = tmp_path / "r.sqlite"
@@ -164,6 +201,32 @@ class TestRecordConfig:
         rows = store.results(run)
         assert len(rows) == len(IMAGES) * len(METRIC_NAMES)
         assert {(r["image"], r["metric"]) for r in rows} == {(i, m) for i in IMAGES for m in METRIC_NAMES}
+
+    def test_steps_used_diagnostics_calibration_round_trip(self, store):
+        run = store.start_run("sweep", {})
+        diag = {"steps_used": None, "remaining_fraction": None, "outside_share": 0.125,
+                "injected_flux": [0.5, 0.25, 1 / 3]}
+        cal = {"path": "/c/m.toml", "sha256": "0f" * 32, "N": 32, "steps": "steady"}
+        store.record_config(run, "slab", "h", {"grid": 32, "steps": "steady"}, "ok", metrics=metric_rows(),
+                            steps_used=None, diagnostics=diag, calibration=cal)
+        store.record_config(run, "slab", "h", {"grid": 32, "steps": 8}, "ok", steps_used=8)
+        a, b = store.configs(run)
+        assert (a["steps_used"], a["diagnostics"], a["calibration"], a["shared"]) == (None, diag, cal, None)
+        assert (b["steps_used"], b["diagnostics"], b["calibration"]) == (8, None, None)
+        rows = store.results(run)
+        assert all(r["diagnostics"] == diag and r["calibration"] == cal for r in rows if r["config_id"] == a["id"])
+        assert [r["steps_used"] for r in rows if r["config_id"] == b["id"]] == [8]
+
+    @pytest.mark.parametrize("kw,field", [
+        ({"steps_used": -1}, "steps_used"), ({"steps_used": 2.5}, "steps_used"), ({"steps_used": True}, "steps_used"),
+        ({"diagnostics": [1, 2]}, "diagnostics"), ({"diagnostics": {"outside_share": float("nan")}}, "diagnostics"),
+        ({"calibration": {"path": "/x"}}, "calibration"), ({"shared": "rsm"}, "shared"),
+    ])
+    def test_bad_new_fields_write_nothing(self, store, kw, field):
+        run = store.start_run("sweep", {})
+        with pytest.raises(InputError, match=f"config slab: {field}:"):
+            store.record_config(run, "slab", "h", {"grid": 32}, "ok", metrics=metric_rows(), **kw)
+        assert count(store.path, "configurations") == count(store.path, "metrics") == 0
 
     def test_cost_falls_back_to_sum_of_stages(self, store):
         run = store.start_run("sweep", {})
@@ -278,11 +341,17 @@ class TestConcurrency:
         assert count(path, "timings") == 2 * n * len(TIMINGS)
 
 
+DIAG = {"steps_used": 8, "remaining_fraction": 0.3, "outside_share": 0.1, "injected_flux": [1.5, 2.0, 0.1]}
+CAL = {"path": "/c/m.toml", "sha256": "ab" * 32, "N": 32, "steps": 8}
+SHARED = {"stages": ["rsm", "injection", "host_material"], "group_steps": [4, 8]}
+
+
 class TestExport:
     def test_csv_round_trip(self, store, tmp_path):
         run = store.start_run("sweep", {})
         store.record_config(run, "slab", "h", {"grid": 32, "steps": 8, "mapping": "paper"}, "ok",
-                            metrics=metric_rows(1 / 3), timings=TIMINGS, render_dir="/renders/a")
+                            metrics=metric_rows(1 / 3), timings=TIMINGS, render_dir="/renders/a", steps_used=8,
+                            diagnostics=DIAG, calibration=CAL, shared=SHARED)
         store.record_config(run, "slab", "h", {"grid": 64, "steps": 8}, "failed", error="oom, really")
         out = tmp_path / "out" / "results.csv"
         n = store.export(out)
@@ -304,6 +373,8 @@ class TestExport:
             assert json.loads(got["per_channel_json"]) == exp["per_channel"]
             assert float(got["ms_total"]) == exp["ms_total"] == 3.5
             assert json.loads(got["param.grid"]) == 32 and json.loads(got["param.mapping"]) == "paper"
+            assert int(got["steps_used"]) == 8 and json.loads(got["diagnostics_json"]) == DIAG
+            assert json.loads(got["calibration_json"]) == CAL and json.loads(got["shared_json"]) == SHARED
 
     def test_parquet_needs_pyarrow(self, store, tmp_path):
         try:
