@@ -72,6 +72,7 @@ __all__ = [
     "clamped_cosine_coeffs",
     "face_sh_integrals",
     "propagation_matrices",
+    "neighbour_slices",
     "scatter_factors",
     "apply_scattering",
     "rotate_to_normal_c10",
@@ -194,6 +195,25 @@ def propagation_matrices(n_quad=48):
     returned so callers may modify it.
     """
     return _propagation_matrices(int(n_quad)).copy()
+
+
+def neighbour_slices(offset):
+    """``(destination, source)`` slices of a ``[z, y, x]`` array for sources at ``d + offset``.
+
+    ``a[src]`` lines up with ``out[dst]`` for every destination whose neighbour
+    ``d + offset`` lies in the grid (``offset`` is ``(ox, oy, oz)``, one of
+    :data:`SOURCE_OFFSETS`); the twin's gather and the steady solver's sparse
+    operator both index their neighbours through it.
+    """
+    src = [slice(None)] * 3
+    dst = [slice(None)] * 3
+    for axis_xyz, o in enumerate(offset):
+        ax = 2 - axis_xyz                            # array axis of x, y, z
+        if o > 0:
+            src[ax], dst[ax] = slice(o, None), slice(None, -o)
+        elif o < 0:
+            src[ax], dst[ax] = slice(None, o), slice(-o, None)
+    return tuple(dst), tuple(src)
 
 
 def scatter_factors(sigma_s_prime, g):

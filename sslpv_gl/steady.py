@@ -184,7 +184,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .sh import SOURCE_OFFSETS, propagation_matrices, scatter_factors
+from .sh import SOURCE_OFFSETS, neighbour_slices, propagation_matrices, scatter_factors
 
 __all__ = [
     "transfer_operator",
@@ -265,19 +265,6 @@ def _skip(skip):
 
 # ---------------------------------------------------------------- operator
 
-def _slices(offset):
-    """(destination, source) slices of a [z, y, x] array for a source at ``d + offset``."""
-    src = [slice(None)] * 3
-    dst = [slice(None)] * 3
-    for axis_xyz, o in enumerate(offset):
-        ax = 2 - axis_xyz                    # array axis of x, y, z
-        if o > 0:
-            src[ax], dst[ax] = slice(o, None), slice(None, -o)
-        elif o < 0:
-            src[ax], dst[ax] = slice(None, o), slice(-o, None)
-    return tuple(dst), tuple(src)
-
-
 def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None):
     """One propagation step (Sec. 3.2, Eq. 3, Sec. 4) as sparse matrices, one per colour.
 
@@ -319,7 +306,7 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)
     k1_src = np.zeros((n_cells, 6, 3))
     for j, s in enumerate(order):
         offset = SOURCE_OFFSETS[s]
-        dst, src = _slices(offset)
+        dst, src = neighbour_slices(offset)
         axis = int(np.flatnonzero(offset)[0])
         src_cell[cells[dst].ravel(), j] = cells[src].ravel()
         # half the path lies in each cell (conventions: mean of source and destination)

@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from .optics import fresnel_transmittance, refract
-from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
+from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, neighbour_slices, propagation_matrices, scatter_factors
 
 __all__ = ["inject", "propagate", "shade_points", "cell_index", "sample_trilinear"]
 
@@ -116,15 +116,8 @@ def _shift_from(a, offset):
     ``a`` is indexed ``[z, y, x, ...]``; ``offset`` is ``(ox, oy, oz)``.
     """
     out = np.zeros_like(a)
-    src = [slice(None)] * 3
-    dst = [slice(None)] * 3
-    for axis_xyz, o in enumerate(offset):
-        ax = 2 - axis_xyz                            # array axis of x, y, z
-        if o > 0:
-            src[ax], dst[ax] = slice(o, None), slice(None, -o)
-        elif o < 0:
-            src[ax], dst[ax] = slice(None, o), slice(-o, None)
-    out[tuple(dst)] = a[tuple(src)]
+    dst, src = neighbour_slices(offset)
+    out[dst] = a[src]
     return out
 
 
