@@ -44,6 +44,11 @@ def test_two_worker_sweep_stores_everything_and_reruns_from_its_config(tmp_path)
         for m in c["metrics"]["subsurface"].values():
             assert m["noise_floor"] is not None
         assert {"rsm", "injection", "propagation", "shading"} <= set(c["timings"])
+        # Since schema v2: steps used, the renderer's diagnostics, no calibration file; K=4 and K=8 of one
+        # (scene, N) were one step group.
+        assert c["steps_used"] == c["params"]["steps"] and c["diagnostics"]["steps_used"] == c["params"]["steps"]
+        assert {"remaining_fraction", "outside_share", "injected_flux"} <= set(c["diagnostics"])
+        assert c["calibration"] is None and c["shared"]["group_steps"] == [4, 8]
         assert (Path(c["render_dir"]) / "subsurface.exr").is_file()
     # Each configuration was measured against ITS scene's reference: the values equal an
     # in-process render measured against that scene's committed reference.

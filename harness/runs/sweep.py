@@ -9,7 +9,7 @@ option                 meaning
                        (``--steps``, ``--mapping``, ``--lookup``, ...)
 ``--size WxH``         image size for SSLPV and the reference (default: the scene's)
 ``--scheduler ADDR``   run on an existing Dask cluster (default: a LocalCluster with
-                       one single-threaded worker process per core)
+                       one single-threaded worker process per core; see "CPU use")
 ``--config FILE``      re-run from the ``sweep.json`` a sweep wrote
 =====================  ==============================================================
 
@@ -22,6 +22,42 @@ every configuration already recorded as ``ok`` and retries failed ones. A run is
 ``interrupted``, or still ``running`` after a crash); running the same sweep again
 continues such a run, while re-running a finished sweep from its ``sweep.json``
 makes a new run (a reproduction).
+
+Step groups (``run_sweep(group=True)``, the default). Configurations of one scene
+that share every parameter but an integer ``steps`` form one group, rendered by ONE
+worker task with :meth:`sslpv_gl.renderer.SSLPVRenderer.render_steps`: RSM,
+injection and the material grid once, one propagation to the group's largest step
+count, the shading pass as each count passes. Every image is bit-identical to a
+render of its count alone (``tests/test_sweep_groups.py``), and each count is still
+its own configuration row with its own metrics. Its timings are those
+``render_steps`` reports: ``propagation`` is the GL time of the steps up to that
+count (what a render of it alone spends), while ``rsm`` and ``injection`` were
+measured ONCE for the group and repeated in each of its rows, whose ``shared``
+column (``{"stages", "group_steps"}``) says so; ``total`` is their sum, the cost of
+that count rendered alone. ``steps = auto`` and ``steady`` cannot share a
+propagation: each is a group of its own (so ``--steps 8,auto,steady,32`` gives
+three groups). ``group=False`` renders every configuration on its own (the sweep
+before step groups; ``benchmarks/bench_sweep.py`` compares the two). Groups are
+submitted largest first (N^3 x largest count) so that the long ones do not trail.
+Every row also records ``steps_used``, the renderer's diagnostics (read back
+outside the stage timers) and the calibrated mapping file with its hash.
+
+Resuming is per configuration: the store's done keys are per step count, and a
+group is formed from the MISSING configurations only, so a group that was
+interrupted after some of its counts were recorded renders only the rest (as a
+smaller group) and no row is ever written twice.
+
+CPU use. A LocalCluster has one worker process per core, one thread each (a
+worker's GL context is not shared between threads), and llvmpipe keeps its own
+thread count (``LP_NUM_THREADS`` unset: one thread per core;
+:data:`DEFAULT_LP_THREADS`, ``run_sweep(lp_threads=...)``; an ``LP_NUM_THREADS``
+in the environment is passed on). Measured on this 2-core machine with
+``benchmarks/bench_sweep.py --table`` (grouped sweep, 3 scenes x N 32, 64 x
+K 4..64 at 64x64, two runs each): workers x LP_NUM_THREADS 1x1 57.8 s, 1x2
+30.5/32.9 s, 2x1 38.6/34.3 s, 2x2 31.9/34.0 s, 2 x llvmpipe's default 19.6/45.6 s.
+One llvmpipe thread per worker is clearly slower; among the rest the differences
+are within this machine's run-to-run noise, so the default restricts nothing
+(workers = cores, llvmpipe's own thread count), which also scales to larger machines.
 """
 
 import dataclasses
@@ -39,6 +75,8 @@ from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
 from harness.scene import list_scenes, load_scene, scene_path
 
 SWEEP_FILE = "sweep.json"
+#: ``LP_NUM_THREADS`` for a LocalCluster's workers (``"default"``: llvmpipe's own). See the module docstring.
+DEFAULT_LP_THREADS = "default"
 
 
 @dataclasses.dataclass
@@ -155,7 +193,14 @@ class ReleaseGL(WorkerPlugin):
         sweep_worker.release_renderer()
 
 
-def make_client(scheduler=None, workers=None):
+def make_client(scheduler=None, workers=None, lp_threads=None):
+    """A Dask client: on ``scheduler``, else on a LocalCluster of ``workers`` single-threaded
+    processes (default: one per core) whose llvmpipe uses ``lp_threads`` threads
+    (``LP_NUM_THREADS``; default :data:`DEFAULT_LP_THREADS`; ``"default"`` leaves
+    llvmpipe's own choice, one thread per core; 0 renders in the calling thread). An
+    ``LP_NUM_THREADS`` already set in the environment is kept. Each worker process owns
+    one GL context, which is not shared between threads, so ``threads_per_worker`` is
+    always 1. The workers of an existing scheduler keep their own environment."""
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -166,8 +211,11 @@ def make_client(scheduler=None, workers=None):
                              "start it with 'dask scheduler' or drop --scheduler for a local cluster") from exc
     else:
         n = workers or os.cpu_count() or 1
+        lp = DEFAULT_LP_THREADS if lp_threads is None else lp_threads
+        # LP_NUM_THREADS already in the environment wins; "default" leaves llvmpipe's own choice.
+        env = {} if lp == "default" or "LP_NUM_THREADS" in os.environ else {"LP_NUM_THREADS": str(int(lp))}
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=50)
+                               silence_logs=50, env=env)
         client = Client(cluster)
     client.register_plugin(ReleaseGL())
     return client, cluster
@@ -181,11 +229,47 @@ def _write_render(render_dir, res):
                      res["images"]["subsurface"], res.get("exposure", 0.0))
 
 
-def run_sweep(cfg, scheduler=None, workers=None, progress=True):
+def group_configs(todo, group=True):
+    """``[(scene, params, key)]`` -> ``[(scene, base_params, [(steps, key), ...])]``: step groups.
+
+    Configurations of one scene that share every parameter but an integer ``steps``
+    form one group (step counts ascending); ``steps = auto`` and ``steady`` cannot share
+    a propagation and each form a group of their own, as does every configuration
+    when ``group`` is False (the per-configuration sweep). Groups come out largest
+    estimated cost first (N^3 x largest step count), so the longest ones do not
+    trail at the end of the sweep.
+    """
+    groups = {}
+    for s, p, key in todo:
+        d = p.as_dict()
+        if group and isinstance(p.steps, int) and not isinstance(p.steps, bool):
+            gkey = (s.name, json.dumps({k: v for k, v in d.items() if k != "steps"}, sort_keys=True, default=str))
+        else:
+            gkey = (s.name, key)
+        groups.setdefault(gkey, (s, p, []))[2].append((p.steps, key))
+    out = [(s, p, sorted(members, key=lambda m: (not isinstance(m[0], int), m[0] if isinstance(m[0], int) else 0)))
+           for s, p, members in groups.values()]
+    out.sort(key=_group_cost, reverse=True)      # stable: input order among equal costs
+    return out
+
+
+def _group_cost(g):
+    _, p, members = g
+    ks = [k if isinstance(k, int) else 64 for k, _ in members]
+    return p.N ** 3 * max(max(ks), 1)
+
+
+def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_threads=None):
     """Run (or resume) a sweep; returns what it wrote and measured.
 
     Everything that can be wrong with the input (scenes, parameters, the scheduler,
     the reference images) is checked before the store or the output folder is touched.
+
+    ``group=True`` (the default) renders each step group (:func:`group_configs`) as one
+    worker task with one propagation; ``group=False`` renders every configuration on
+    its own (the sweep before step groups; kept for the benchmark). Both record the
+    same rows, with bit-identical images and metrics. ``lp_threads`` sets
+    ``LP_NUM_THREADS`` for a LocalCluster's workers (see :data:`DEFAULT_LP_THREADS`).
     """
     from harness.store import Store
 
@@ -198,7 +282,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
     scenes = [load_scene(n) for n in cfg.scenes]
     if cfg.size:
         scenes = [s.with_resolution(*cfg.size) for s in scenes]
-    client, cluster = make_client(scheduler, workers) if scheduler else (None, None)
+    client, cluster = make_client(scheduler, workers, lp_threads) if scheduler else (None, None)
     try:
         refs = {}
         for s in scenes:
@@ -220,10 +304,12 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
                        "sweep_json": str(out / SWEEP_FILE), "configurations": len(scenes) * len(configs),
                        "skipped_done": len(scenes) * len(configs) - len(todo), "ok": 0, "failed": 0,
                        "references": {k: str(v) for k, v in refs.items()}, "gl_renderer": None}
+            groups = group_configs(todo, group)
+            summary["groups"] = len(groups)
             if todo:
                 if client is None:
-                    client, cluster = make_client(None, workers)
-                _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, progress)
+                    client, cluster = make_client(None, workers, lp_threads)
+                _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress)
             # A run with failed configurations stays open: the same command retries them.
             status = "finished" if summary["failed"] == 0 else "incomplete"
             store.finish_run(run_id, status, gl_renderer=summary["gl_renderer"])
@@ -237,8 +323,14 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True):
     return summary
 
 
-def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, progress):
-    """Submit every configuration, then record each result as it arrives (client-side only)."""
+def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress):
+    """Submit every step group, then record each configuration as its group arrives (client-side only).
+
+    Test hook: with ``SSLPV_SWEEP_CRASH_MID_GROUP=1`` the client kills its own process
+    group (itself and a LocalCluster's workers, as a crash would) right after recording
+    the first configuration of a group of two or more; nothing else of that group is
+    recorded. Only for the tests: run it in a process group of its own.
+    """
     from dask.distributed import as_completed
 
     from harness.io.images import auto_exposure
@@ -252,38 +344,63 @@ def _dispatch(client, store, run_id, todo, arrays, out, refs, cfg, summary, prog
         shared[name] = (client.scatter([arr], broadcast=True)[0], sweep_worker.reference_floors(arr),
                         auto_exposure(arr["subsurface"]))
     futures = {}
-    for s, p, key in todo:
+    n_groups = len(groups)
+    for i, (s, p, members) in enumerate(groups):
         ref_f, floors, _ = shared[s.name]
-        fut = client.submit(sweep_worker.run_config, str(s.path), cfg.size, p.as_dict(), ref_f, floors,
-                            key=f"sslpv-{key}", pure=False, retries=2)
-        futures[fut] = (s, p, key)
+        ks = [k for k, _ in members]
+        tag = members[0][1] if len(members) == 1 else "group-" + members[0][1] + f"-{len(members)}"
+        # Priority: groups come largest first; Dask runs higher priorities first.
+        fut = client.submit(sweep_worker.run_group, str(s.path), cfg.size, p.as_dict(), ks, ref_f, floors,
+                            key=f"sslpv-{tag}", pure=False, retries=2, priority=n_groups - i)
+        futures[fut] = (s, p, members)
+    crash_mid_group = os.environ.get("SSLPV_SWEEP_CRASH_MID_GROUP") == "1"
     try:
-        with _progress(progress, len(futures)) as advance:
+        with _progress(progress, sum(len(m) for _, _, m in futures.values())) as advance:
             for fut in as_completed(list(futures)):
-                s, p, key = futures.pop(fut)
+                s, p, members = futures.pop(fut)
                 try:
-                    res = fut.result()
+                    results = fut.result()
                 except Exception as exc:  # a worker died more often than the retries allow
-                    res = {"status": "failed", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
-                render_dir = None
-                if res["status"] == "ok":
-                    summary["gl_renderer"] = summary["gl_renderer"] or res["gl_renderer"]
-                    render_dir = out / "renders" / s.name / key[:16]
-                    res.update(params=p.as_dict(), scene=s.name, scene_hash=s.content_hash,
-                               exposure=shared[s.name][2])
-                    _write_render(render_dir, res)
-                    summary["ok"] += 1
-                else:
-                    summary["failed"] += 1
-                store.record_config(run_id, s.name, s.content_hash, p.as_dict(), res["status"],
-                                    error=res.get("error"), metrics=res.get("metrics", []),
-                                    timings=res.get("timings", {}),
-                                    render_dir=str(render_dir) if render_dir else None,
-                                    reference_dir=str(refs[s.name]))
-                advance(f"{s.name} N={p.N} K={p.steps} {p.mapping}")
+                    err = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                    results = [{"status": "failed", "error": err} for _ in members]
+                for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
+                    pk = p.replace(steps=k)
+                    _record(store, run_id, s, pk, key, res, out, refs, summary, shared[s.name][2])
+                    advance(f"{s.name} N={pk.N} K={pk.steps} {pk.mapping}")
+                    if crash_mid_group and n_recorded == 0 and len(members) > 1:
+                        _crash()
     except KeyboardInterrupt:
         store.finish_run(run_id, "interrupted", gl_renderer=summary["gl_renderer"])
         raise
+
+
+def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
+    """Write one configuration's render folder, then its store row (one transaction)."""
+    render_dir = None
+    if res["status"] == "ok":
+        summary["gl_renderer"] = summary["gl_renderer"] or res["gl_renderer"]
+        render_dir = out / "renders" / s.name / key[:16]
+        res.update(params=p.as_dict(), scene=s.name, scene_hash=s.content_hash, exposure=exposure)
+        _write_render(render_dir, res)
+        summary["ok"] += 1
+    else:
+        summary["failed"] += 1
+    store.record_config(run_id, s.name, s.content_hash, p.as_dict(), res["status"],
+                        error=res.get("error"), metrics=res.get("metrics", []),
+                        timings=res.get("timings", {}),
+                        render_dir=str(render_dir) if render_dir else None,
+                        reference_dir=str(refs[s.name]), steps_used=res.get("steps_used"),
+                        diagnostics=res.get("diagnostics"), calibration=res.get("calibration"),
+                        shared=res.get("shared"))
+
+
+def _crash():
+    """Die like a killed sweep: SIGKILL to this process group when it leads one, else to itself."""
+    import signal
+
+    if os.getpgid(0) == os.getpid():
+        os.killpg(os.getpid(), signal.SIGKILL)
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _resume_or_start(store, cfg, out):

@@ -75,29 +75,98 @@ def reference_floors(ref):
 
 def run_config(scene_path, size, params, ref, floors):
     """Render one configuration and measure it; errors are returned, not raised."""
+    return run_group(scene_path, size, params, [params["steps"]], ref, floors)[0]
+
+
+def _finite_or_none(obj):
+    """A JSON-ready copy of the renderer's diagnostics: numpy to Python, NaN/inf to None."""
+    if isinstance(obj, dict):
+        return {str(k): _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _finite_or_none(obj.tolist())
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def _ok_result(result, ref, floors, group_steps):
+    images = {"subsurface": result.subsurface, "full": result.full}
+    for part, img in images.items():
+        if not np.all(np.isfinite(img)):
+            raise FloatingPointError(f"SSLPV {part} image has {int(np.count_nonzero(~np.isfinite(img)))} "
+                                     "non-finite pixels")
+    metrics = measure(images, ref, floors)
+    # Only the four stages of the paper's Table 1 (a timer query that failed reports NaN and is dropped).
+    timings = {k: float(v) for k, v in result.timings_ms.items()
+               if k in STAGES and isinstance(v, (int, float)) and np.isfinite(v)}
+    if len(timings) == len(STAGES):
+        timings["total"] = float(sum(timings.values()))
+    shared = result.timings_ms.get("shared")
+    return {"status": "ok", "images": images, "mask": result.mask, "timings": timings, "metrics": metrics,
+            "gl_renderer": result.gl_renderer, "steps_used": result.steps_used,
+            "diagnostics": _finite_or_none(result.diagnostics) if result.diagnostics is not None else None,
+            "calibration": _finite_or_none(result.calibration) if result.calibration is not None else None,
+            "shared": {"stages": list(shared), "group_steps": list(group_steps)} if shared else None}
+
+
+def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=True):
+    """Render one configuration per step count in ``steps_list`` (all else from ``params``) and measure each.
+
+    Two or more integer step counts are rendered by ONE
+    :meth:`~sslpv_gl.renderer.SSLPVRenderer.render_steps` call: RSM, injection and the
+    material once, one propagation to the largest count, the shading pass as each count
+    passes. Each image is bit-identical to rendering its count alone. Each result's
+    ``propagation`` timing is that of the steps up to its own count; ``rsm`` and
+    ``injection`` were measured once for the group and are repeated in every result,
+    whose ``shared`` entry (``{"stages", "group_steps"}``) says so. A single step count
+    (or ``auto``/``steady``) is an ordinary :meth:`render` and has ``shared = None``.
+
+    Returns one dict per entry of ``steps_list``, in its order; errors are returned,
+    not raised (a failed group fails each of its step counts with the same error).
+    ``diagnostics=True`` asks the renderer for its diagnostics (read back outside the
+    stage timers).
+    """
     from sslpv_gl.params import SSLPVParams
 
     from harness.runs.params import config_label
 
     t0 = time.perf_counter()
+    ks = list(steps_list)
+    out = [None] * len(ks)
+    # Fault injection for the sweep's own tests: the configuration with this label fails.
+    inject_fail = os.environ.get("SSLPV_SWEEP_FAIL_CONFIG")
+    todo = []
+    for i, k in enumerate(ks):
+        if inject_fail and inject_fail == config_label(dict(params, steps=k)):
+            out[i] = {"status": "failed", "error": "RuntimeError: failure injected by SSLPV_SWEEP_FAIL_CONFIG"}
+        else:
+            todo.append(i)
     try:
-        # Fault injection for the sweep's own tests: the configuration with this label fails.
-        if os.environ.get("SSLPV_SWEEP_FAIL_CONFIG") == config_label(params):
-            raise RuntimeError("failure injected by SSLPV_SWEEP_FAIL_CONFIG")
-        scene = _scene(str(scene_path), tuple(size) if size else None)
-        result = renderer().render(scene, SSLPVParams(**params))
-        images = {"subsurface": result.subsurface, "full": result.full}
-        for part, img in images.items():
-            if not np.all(np.isfinite(img)):
-                raise FloatingPointError(f"SSLPV {part} image has {int(np.count_nonzero(~np.isfinite(img)))} "
-                                         "non-finite pixels")
-        metrics = measure(images, ref, floors)
-        # Only the four stages of the paper's Table 1 (a timer query that failed reports NaN and is dropped).
-        timings = {k: float(v) for k, v in result.timings_ms.items() if k in STAGES and np.isfinite(v)}
-        if len(timings) == len(STAGES):
-            timings["total"] = float(sum(timings.values()))
-        return {"status": "ok", "images": images, "mask": result.mask, "timings": timings, "metrics": metrics,
-                "gl_renderer": result.gl_renderer, "wall_s": time.perf_counter() - t0}
-    except Exception as exc:  # one failed configuration is recorded; the sweep goes on
-        return {"status": "failed", "error": f"{type(exc).__name__}: {exc}".splitlines()[0],
-                "wall_s": time.perf_counter() - t0}
+        if todo:
+            scene = _scene(str(scene_path), tuple(size) if size else None)
+            base = SSLPVParams(**dict(params, steps=ks[todo[0]]))
+            run_ks = [ks[i] for i in todo]
+            if len(run_ks) > 1:
+                results = renderer().render_steps(scene, base, run_ks, diagnostics=diagnostics)
+                by_k = {r.steps_used: r for r in results}
+                if len(by_k) != len(set(run_ks)):      # render_steps gives one result per distinct count
+                    by_k = dict(zip(sorted(set(run_ks)), results))
+                group_steps = sorted(set(run_ks))
+            else:
+                by_k = {run_ks[0]: renderer().render(scene, base, diagnostics=diagnostics)}
+                group_steps = run_ks
+            for i in todo:
+                try:
+                    out[i] = _ok_result(by_k[ks[i]], ref, floors, group_steps)
+                except Exception as exc:  # one bad image fails its own configuration only
+                    out[i] = {"status": "failed", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+    except Exception as exc:  # one failed group is recorded; the sweep goes on
+        err = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        for i in todo:
+            out[i] = {"status": "failed", "error": err}
+    wall = time.perf_counter() - t0
+    for r in out:
+        r["wall_s"] = wall
+    return out

@@ -12,7 +12,7 @@ from harness.store.store import _dumps
 #: Fixed leading columns of :meth:`Store.export` (``param.<name>`` columns follow).
 EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "status", "error", "render_dir",
                   "reference_dir", "created_at", "cost_ms"] + [f"ms_{s}" for s in STAGES] + [
-                  "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
+                  "steps_used", "diagnostics_json", "calibration_json", "shared_json", "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
                   "metric_params_json"]
 
 
@@ -20,7 +20,8 @@ def export(store, path, run_id=None, scene=None):
     """Write :meth:`Store.results <harness.store.store.Store.results>` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
 
     Dicts and lists become JSON text columns (``params_json``,
-    ``per_channel_json``, ``metric_params_json``) and each parameter also
+    ``per_channel_json``, ``metric_params_json``, ``diagnostics_json``,
+    ``calibration_json``, ``shared_json``) and each parameter also
     gets its own ``param.<name>`` column (JSON text). Floats are written
     with ``repr`` so that they read back exactly. Returns the row count.
     """
@@ -39,7 +40,10 @@ def export(store, path, run_id=None, scene=None):
     pnames = sorted({k for r in rows for k in r["params"]})
     flat = []
     for r in rows:
-        d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params")}
+        d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params", "diagnostics",
+                                                     "calibration", "shared")}
+        for name in ("diagnostics", "calibration", "shared"):
+            d[f"{name}_json"] = None if r[name] is None else _dumps(r[name], False)
         d["params_json"] = _dumps(r["params"])
         d["per_channel_json"] = None if r["per_channel"] is None else _dumps(r["per_channel"], False)
         d["metric_params_json"] = None if r["metric_params"] is None else _dumps(r["metric_params"], False)

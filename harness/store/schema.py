@@ -13,7 +13,15 @@ table              columns
                    config_json, out_dir, status (``running``, ``ok``, ...)
 ``configurations`` id, run_id, scene, scene_hash, config_key, params_json, status
                    (``ok`` | ``failed``), error, render_dir, reference_dir,
-                   created_at; UNIQUE(run_id, config_key)
+                   created_at; UNIQUE(run_id, config_key); since v2 also
+                   steps_used (INTEGER; NULL for ``steps = steady`` or when
+                   unknown), diagnostics_json (remaining_fraction,
+                   outside_share, injected_flux, steps_used), calibration_json
+                   (path and sha256 of a calibrated mapping file, or NULL) and
+                   shared_json (NULL for a configuration rendered alone; for one
+                   rendered in a step group, ``{"stages": [...], "group_steps":
+                   [...]}``: the stages measured once for the whole group and the
+                   step counts that shared them)
 ``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
                    noise_floor, per_channel_json, params_json;
                    PRIMARY KEY(config_id, image, metric)
@@ -97,6 +105,16 @@ def _migration_1(db):
     """)
 
 
+def _migration_2(db):
+    """Steps used, renderer diagnostics, the calibration file and shared-stage notes per configuration."""
+    _run_script(db, """
+        ALTER TABLE configurations ADD COLUMN steps_used INTEGER;
+        ALTER TABLE configurations ADD COLUMN diagnostics_json TEXT;
+        ALTER TABLE configurations ADD COLUMN calibration_json TEXT;
+        ALTER TABLE configurations ADD COLUMN shared_json TEXT
+    """)
+
+
 def _run_script(db, script):
     """Run ``;``-separated DDL statement by statement (``executescript`` would
     COMMIT the migration's transaction half-way)."""
@@ -108,7 +126,7 @@ def _run_script(db, script):
 #: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
 #: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
 #: ``user_version``, so a failed migration leaves the store as it was.
-MIGRATIONS = [_migration_1]
+MIGRATIONS = [_migration_1, _migration_2]
 
 
 def schema_version():

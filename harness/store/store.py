@@ -281,7 +281,8 @@ class Store:
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
     def record_config(self, run_id, scene, scene_hash, params, status, error=None, metrics=(),
-                      timings=None, render_dir=None, reference_dir=None):
+                      timings=None, render_dir=None, reference_dir=None, steps_used=None, diagnostics=None,
+                      calibration=None, shared=None):
         """Record one configuration with its metrics and timings in ONE transaction.
 
         Either everything is written or nothing is (a bad metric value rolls
@@ -305,6 +306,19 @@ class Store:
             Stage (:data:`STAGES`) -> milliseconds.
         render_dir, reference_dir : path, optional
             Where the SSLPV render and the reference images are.
+        steps_used : int, optional
+            Propagation steps the render ran (``steps = auto`` decides it;
+            None for ``steps = steady``, which solves instead of stepping).
+        diagnostics : dict, optional
+            The renderer's diagnostics (``remaining_fraction``,
+            ``outside_share``, ``injected_flux``, ``steps_used``), stored as JSON.
+        calibration : dict, optional
+            ``{"path", "sha256", ...}`` of the calibrated mapping file the render
+            used (None for a built-in mapping).
+        shared : dict, optional
+            For a configuration rendered in a step group (one propagation for
+            several step counts): ``{"stages": [...], "group_steps": [...]}``,
+            the stages whose timings were measured once for the group.
 
         Returns
         -------
@@ -321,6 +335,20 @@ class Store:
         except (TypeError, ValueError) as exc:
             raise InputError(where, "params", f"is not JSON-serialisable ({exc})",
                              "pass plain numbers, strings, lists and dicts") from exc
+        if steps_used is not None and (isinstance(steps_used, bool) or not isinstance(steps_used, int)
+                                       or steps_used < 0):
+            raise InputError(where, "steps_used", f"is {steps_used!r}", "record a step count >= 0, or None")
+        extra = {}
+        for name, value in (("diagnostics", diagnostics), ("calibration", calibration), ("shared", shared)):
+            if value is not None and not isinstance(value, dict):
+                raise InputError(where, name, f"is a {type(value).__name__}", "pass a dict, or None")
+            if name == "calibration" and value is not None and not {"path", "sha256"} <= set(value):
+                raise InputError(where, name, f"has keys {sorted(value)}", "give at least 'path' and 'sha256'")
+            try:
+                extra[name] = None if value is None else _dumps(value, False)
+            except (TypeError, ValueError) as exc:
+                raise InputError(where, name, f"is not JSON-serialisable with finite numbers ({exc})",
+                                 "pass plain numbers (None for a missing one), strings, lists and dicts") from exc
         key = self.config_key(scene_hash, params)
         with self._write() as db:
             old = db.execute("SELECT id, status FROM configurations WHERE run_id = ? AND config_key = ?",
@@ -334,11 +362,13 @@ class Store:
                 raise InputError(where, "run_id", f"run {run_id} does not exist", "pass an id from start_run")
             cur = db.execute(
                 "INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json, status,"
-                " error, render_dir, reference_dir, created_at) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                " error, render_dir, reference_dir, created_at, steps_used, diagnostics_json, calibration_json,"
+                " shared_json) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (run_id, str(scene), str(scene_hash), key, params_json, status,
                  None if error is None else str(error),
                  None if render_dir is None else str(render_dir),
-                 None if reference_dir is None else str(reference_dir), _now()))
+                 None if reference_dir is None else str(reference_dir), _now(), steps_used,
+                 extra["diagnostics"], extra["calibration"], extra["shared"]))
             cid = cur.lastrowid
             # Rows are checked one at a time as they are inserted; a bad one
             # raises inside the transaction and everything above rolls back.
@@ -391,8 +421,10 @@ class Store:
 
         Each has the ``configurations`` columns, ``run_*`` fields of its run,
         ``params`` (dict), ``timings`` (stage -> ms), ``cost_ms`` (``total``,
-        else the sum of the stages, else None) and ``metrics``
-        (``{image: {metric: {value, noise_floor, per_channel, params}}}``).
+        else the sum of the stages, else None), ``metrics``
+        (``{image: {metric: {value, noise_floor, per_channel, params}}}``),
+        ``steps_used`` (int or None), and ``diagnostics``, ``calibration`` and
+        ``shared`` (dicts, or None; see :meth:`record_config`).
         """
         where, args = self._filter(run_id, scene)
         confs = self._read("SELECT c.*, r.kind AS run_kind, r.date AS run_date, r.started_at AS run_started_at,"
@@ -402,6 +434,8 @@ class Store:
         for c in confs:
             d = dict(c)
             d["params"] = _loads(d.pop("params_json"))
+            for name in ("diagnostics", "calibration", "shared"):
+                d[name] = _loads(d.pop(f"{name}_json"))
             d["timings"], d["metrics"], d["cost_ms"] = {}, {}, None
             out[d["id"]] = d
         if not out:
@@ -424,13 +458,15 @@ class Store:
 
         Columns: run_id, config_id, scene, scene_hash, config_key, status,
         error, render_dir, reference_dir, created_at, cost_ms, ``ms_<stage>``
-        for each stage, params (dict), image, metric, value, noise_floor,
-        per_channel (list or None), metric_params (dict).
+        for each stage, steps_used, diagnostics, calibration, shared (dicts or
+        None), params (dict), image, metric, value, noise_floor, per_channel
+        (list or None), metric_params (dict).
         """
         rows = []
         for c in self.configs(run_id, scene):
             base = {k: c[k] for k in ("run_id", "id", "scene", "scene_hash", "config_key", "status", "error",
-                                      "render_dir", "reference_dir", "created_at", "cost_ms")}
+                                      "render_dir", "reference_dir", "created_at", "cost_ms", "steps_used",
+                                      "diagnostics", "calibration", "shared")}
             base["config_id"] = base.pop("id")
             for s in STAGES:
                 base[f"ms_{s}"] = c["timings"].get(s)
