@@ -90,3 +90,25 @@ def test_bad_matrix_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "params.colour: is not a renderer parameter" in err[0]
     assert not (tmp_path / "s.sqlite").exists()
+
+
+def test_matrix_also_products(tmp_path):
+    """[[also]] tables add further cartesian products; a relative calibrated path is the repository's."""
+    from harness import paths
+    from harness.errors import InputError
+    from harness.regression.nightly import load_matrix
+    from harness.runs.sweep import expand_all
+
+    m = tmp_path / "m.toml"
+    m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4, 8]\nmapping = ["collision"]\n'
+                 '[[also]]\ngrid = [8]\nsteps = [8, "steady"]\nmapping = ["diffusion", "calibrated:x/c.toml"]\n')
+    params = load_matrix(m)["params"]
+    assert isinstance(params, list) and len(params) == 2
+    assert params[1]["mapping"][1] == f"calibrated:{paths.REPO / 'x/c.toml'}"
+    params[1]["mapping"] = ["diffusion"]            # the file does not exist; the union is what is tested
+    configs = expand_all(params)
+    assert [(c.steps, c.mapping) for c in configs] == [(4, "collision"), (8, "collision"), (8, "diffusion"),
+                                                       ("steady", "diffusion")]
+    m.write_text('[params]\ngrid = [8]\n[[also]]\ngridd = [8]\n')
+    with pytest.raises(InputError, match=r"also\[0\]\.gridd: is not a renderer parameter"):
+        load_matrix(m)

@@ -38,19 +38,38 @@ def load_matrix(path):
         raise InputError(path, "toml", f"is not valid TOML ({exc})", "fix the syntax") from exc
     scenes = data.get("scenes", "all")
     scenes = list_scenes() if scenes == "all" else resolve_scenes(scenes)
-    raw = data.get("params", {})
-    unknown = set(raw) - set(CLI_TO_FIELD)
-    if unknown:
-        raise InputError(path, f"params.{sorted(unknown)[0]}", "is not a renderer parameter",
-                         f"use: {', '.join(CLI_TO_FIELD)}")
-    for k, v in raw.items():
-        if not isinstance(v, list) or not v:
-            raise InputError(path, f"params.{k}", "must be a non-empty list", f"write e.g. {k} = [8, 16]")
-    params = parse_lists(raw)
+    params = _product(path, "params", data.get("params", {}))
+    also = data.get("also", [])
+    if not isinstance(also, list) or not all(isinstance(t, dict) for t in also):
+        raise InputError(path, "also", "must be [[also]] tables", "write each extra product as an [[also]] table")
+    if also:
+        params = [params] + [_product(path, f"also[{i}]", t) for i, t in enumerate(also)]
     size = data.get("size")
     size = parse_size(f"{size[0]}x{size[1]}") if size else None
     tol = dict(DEFAULT_TOLERANCE, **data.get("tolerance", {}))
     return {"scenes": scenes, "params": params, "size": size, "tolerance": tol, "path": str(path)}
+
+
+def _product(path, where, raw):
+    """One ``[params]`` or ``[[also]]`` table -> typed lists (every combination is rendered)."""
+    from harness import paths
+
+    if not isinstance(raw, dict):
+        raise InputError(path, where, "must be a table", f"write [{where}] with lists of values")
+    unknown = set(raw) - set(CLI_TO_FIELD)
+    if unknown:
+        raise InputError(path, f"{where}.{sorted(unknown)[0]}", "is not a renderer parameter",
+                         f"use: {', '.join(CLI_TO_FIELD)}")
+    for k, v in raw.items():
+        if not isinstance(v, list) or not v:
+            raise InputError(path, f"{where}.{k}", "must be a non-empty list", f"write e.g. {k} = [8, 16]")
+    lists = parse_lists(raw)
+    # a calibrated mapping named relative to the repository works from any folder
+    if "mapping" in lists:
+        lists["mapping"] = [f"calibrated:{paths.REPO / m[len('calibrated:'):]}"
+                            if m.startswith("calibrated:") and not Path(m[len("calibrated:"):]).is_absolute()
+                            else m for m in lists["mapping"]]
+    return lists
 
 
 def rows_for_run(store, run_id):

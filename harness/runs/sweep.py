@@ -72,7 +72,22 @@ from dask.distributed import WorkerPlugin
 from harness.io.atomic import atomic_write
 from harness.errors import InputError
 from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
+
 from harness.scene import list_scenes, load_scene, scene_path
+
+
+def expand_all(params):
+    """One product (dict of lists) or several (a list of them) -> their configurations, first seen first."""
+    products = params if isinstance(params, list) else [params]
+    out, seen = [], set()
+    for product in products:
+        for p in expand(product):
+            key = tuple(sorted(p.as_dict().items()))
+            if key not in seen:
+                seen.add(key)
+                out.append(p)
+    return out
+
 
 SWEEP_FILE = "sweep.json"
 #: ``LP_NUM_THREADS`` for a LocalCluster's workers (``"default"``: llvmpipe's own). See the module docstring.
@@ -84,7 +99,7 @@ class SweepConfig:
     """The resolved configuration of a sweep; written beside its results as ``sweep.json``."""
 
     scenes: list                      # scene names or folders
-    params: dict                      # SSLPVParams field -> list of values
+    params: dict                      # SSLPVParams field -> list of values (or a list of such products)
     out: str                          # output folder
     store: str = ""                   # results store (default OUT/store.sqlite)
     size: list = None                 # [W, H] or None for the scenes' own size
@@ -276,7 +291,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     t0 = time.perf_counter()
     out = Path(cfg.out)
     store_path = Path(cfg.store) if cfg.store else out / "store.sqlite"
-    configs = expand(cfg.params)
+    configs = expand_all(cfg.params)
     if not configs:
         raise InputError("sweep", "params", "no configurations", "give at least one value per parameter")
     scenes = [load_scene(n) for n in cfg.scenes]
