@@ -13,14 +13,16 @@ Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot f
     the factors 3, 2 and 1.2 the paper's Fig. 8 applies by hand at 8, 16 and 32 steps.
 ``refine``
     Subsurface relMSE and energy ratio against the committed 64x64 references, at N = 16, 32, 64
-    with converged steps, for every index-matched suite scene and every mapping. The noise floor
-    is the same metric between the reference's two halves.
+    at the converged accumulation (``steps = steady``), for every index-matched suite scene, every
+    mapping and the outside modes ``vacuum``, ``extrapolated`` and ``absorb``. The noise floor is
+    the same metric between the reference's two halves.
 
 Run: ``.venv/bin/python benchmarks/sslpv_light_budget.py --part outside --out reports/light_budget``
 (``--part all`` runs the three; ``--scenes a,b`` and ``--grids 16,32`` narrow them).
 """
 
 import argparse
+import itertools
 import json
 import time
 from pathlib import Path
@@ -84,14 +86,14 @@ def part_gap(renderer, scenes, out, outside_modes=("vacuum", "absorb")):
     return rows
 
 
-def part_refine(renderer, scenes, out, grids=(16, 32, 64), outside="absorb"):
+def part_refine(renderer, scenes, out, grids=(16, 32, 64), outsides=("vacuum", "extrapolated", "absorb")):
     from harness.metrics import compute
     from harness.regression.accuracy import load_case_reference
     from harness.scene import load_scene
     from sslpv_gl.params import SSLPVParams
 
     rows = []
-    print(f"{'scene':<20} {'mapping':<10} " + " ".join(f"{'relMSE N' + str(n):>13}" for n in grids)
+    print(f"{'scene':<20} {'mapping':<10} {'outside':<13} " + " ".join(f"{'relMSE N' + str(n):>13}" for n in grids)
           + " " + " ".join(f"{'E/E N' + str(n):>9}" for n in grids) + f" {'floor':>8}")
     for name in scenes:
         scene = load_scene(name).with_resolution(64, 64)
@@ -99,17 +101,16 @@ def part_refine(renderer, scenes, out, grids=(16, 32, 64), outside="absorb"):
             continue
         ref, floors = load_case_reference(scene)
         floor = floors["subsurface"]["relmse"]
-        for m in MAPPINGS:
-            rel, er, steps = {}, {}, {}
+        for m, outside in itertools.product(MAPPINGS, outsides):
+            rel, er = {}, {}
             for n in grids:
-                p = SSLPVParams(N=n, steps="auto", max_steps=4096, mapping=m, outside=outside, **_setup(m, scene))
+                p = SSLPVParams(N=n, steps="steady", mapping=m, outside=outside, **_setup(m, scene))
                 res = renderer.render(scene, p)
                 rel[n] = float(compute("relmse", res.subsurface, ref["subsurface"], ref["mask"]).value)
                 er[n] = float(compute("energy_ratio", res.subsurface, ref["subsurface"], ref["mask"]).value)
-                steps[n] = res.steps_used
             rows.append({"scene": name, "mapping": m, "outside": outside, "relmse": rel, "energy_ratio": er,
-                         "steps": steps, "noise_floor_relmse": floor})
-            print(f"{name:<20} {m:<10} " + " ".join(f"{rel[n]:13.4g}" for n in grids) + " "
+                         "noise_floor_relmse": floor})
+            print(f"{name:<20} {m:<10} {outside:<13} " + " ".join(f"{rel[n]:13.4g}" for n in grids) + " "
                   + " ".join(f"{er[n]:9.3f}" for n in grids) + f" {floor:8.2g}")
     _plot_refine(rows, grids, out / "refine.png")
     return rows
@@ -128,7 +129,7 @@ def _plot_refine(rows, grids, path):
     for ax, s in zip(axes[0], scenes):
         for r in rows:
             if r["scene"] == s:
-                ax.loglog(grids, [r["relmse"][n] for n in grids], "o-", label=r["mapping"])
+                ax.loglog(grids, [r["relmse"][n] for n in grids], "o-", label=f"{r['mapping']}/{r['outside']}")
                 floor = r["noise_floor_relmse"]
         ax.axhline(floor, color="grey", ls=":", label="noise floor")
         ax.set_title(s, fontsize=9)
