@@ -396,7 +396,26 @@ def spectral_radius(P, tol=1e-3, _split=None):
         if w is None or len(w) == 0:
             _bad("steady_state", "ARPACK could not estimate the spectral radius of the transfer operator",
                  "pass check_spectrum=False to skip the check, or use propagate_until")
+    except spla.ArpackError:
+        # ARPACK stops when its Krylov space closes on an invariant subspace (seen as
+        # "starting vector is zero" on a scene whose lit cells reach only part of the grid):
+        # estimate the radius by power iteration on the reduced operator instead
+        return _power_radius(_split.reduced, v0)
     return float(np.sqrt(np.abs(w).max()))
+
+
+def _power_radius(apply, v, iterations=400):
+    """sqrt of the growth rate of ``||Q^k v||`` (the reduced operator Q = P_br P_rb) over ``iterations``."""
+    v = v / np.linalg.norm(v)
+    rate = 0.0
+    for k in range(iterations):
+        w = apply(v)
+        norm = float(np.linalg.norm(w))
+        if norm == 0.0:
+            return 0.0                               # nilpotent on this start: the series converges
+        rate = norm
+        v = w / norm
+    return float(np.sqrt(rate))
 
 
 # ------------------------------------------------------------ steady state

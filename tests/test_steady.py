@@ -284,3 +284,12 @@ def test_sink_cells_match_the_twin():
     # power: the same solve without the sinks is a different grid
     acc_vac, _ = steady_state(c0, sig, sp, g, dx, skip=1)
     assert np.abs(acc_vac - ref).max() > 1e-2 * np.abs(ref[..., 0]).max()
+
+
+def test_power_radius_fallback():
+    """The power-iteration fallback (used when ARPACK closes on an invariant subspace) finds a known radius."""
+    from sslpv_gl.steady import _power_radius
+
+    d = np.linspace(0.1, 0.81, 50)                 # Q = diag(d): rho(P) = sqrt(rho(Q)) = 0.9
+    assert _power_radius(lambda v: d * v, np.ones(50)) == pytest.approx(0.9, rel=1e-6)
+    assert _power_radius(lambda v: 0.0 * v, np.ones(50)) == 0.0
