@@ -57,6 +57,7 @@ Limits
 from __future__ import annotations
 
 import contextlib
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -121,6 +122,20 @@ class RenderResult:
     steps_used: int | None = None        # propagation steps run (None for steps=steady)
     diagnostics: dict | None = None      # steps_used, injected_flux, remaining_fraction, outside_share
     calibration: dict | None = None      # path, sha256 and budget of a calibrated mapping
+
+
+def _current(method):
+    """Run a public method with this renderer's context current (and the previous one restored after).
+
+    Several renderers (several EGL contexts) can live in one process, as in a test
+    session or a sweep worker that also renders by hand; GL calls go to whichever
+    context is current, so each entry point makes its own current first.
+    """
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with self.ctx:
+            return method(self, *args, **kwargs)
+    return wrapper
 
 
 class SSLPVRenderer:
@@ -223,6 +238,7 @@ class SSLPVRenderer:
         vao = self._mesh_vao(scene, prog, "rsm")
         return rsm.render_maps(self.ctx, prog, vao, self._targets, scene, params, views)
 
+    @_current
     def rsm_texels(self, scene, params=None):
         """Injection-resolution RSM of each light read back -> list of (M, 10) float32, top row first.
 
@@ -245,6 +261,7 @@ class SSLPVRenderer:
         injection.run(self.ctx, prog, self._points, unflatten, grid, sources, med.bbox_min, med.bbox_max,
                       scene.boundary.eta, offset, grid.prop_a)
 
+    @_current
     def inject(self, texels_list, light_positions, scene, params=None):
         """GL injection of given RSM texels (one (M,10) array per light) -> (N,N,N,3,4) float32."""
         params = params or SSLPVParams()
@@ -265,6 +282,7 @@ class SSLPVRenderer:
         progs = {acc: self._program(("propagate", grid.precision, acc)) for acc in propagation.ACC_MODES}
         return propagation.run(self.ctx, progs, grid, steps, skip, on_step)
 
+    @_current
     def propagate(self, c0, material, dx, steps, skip=2, precision="fp32"):
         """GL propagation of ``c0`` (N,N,N,3,4) with a material dict -> ``(prop, accum)`` float32."""
         c0 = np.asarray(c0, dtype=np.float32)
@@ -276,6 +294,7 @@ class SSLPVRenderer:
         final, _ = self._propagate(grid, int(steps), int(skip))
         return read_grid(final, precision), read_grid(grid.accum, precision)
 
+    @_current
     def read_accumulation(self, params):
         """The accumulation grid of the last render/propagate with ``params.N``/``precision`` -> (N,N,N,3,4)."""
         return read_grid(self._grid(params.N, params.precision).accum, params.precision)
@@ -292,6 +311,7 @@ class SSLPVRenderer:
 
     # ------------------------------------------------------------ front door
 
+    @_current
     def render(self, scene, params=None, diagnostics=False):
         """Render ``scene`` with SSLPV -> :class:`RenderResult` (images top row first).
 
@@ -304,6 +324,7 @@ class SSLPVRenderer:
             raise TypeError("params must be an SSLPVParams")
         return self._render(scene, params, [params.steps], diagnostics)[0]
 
+    @_current
     def render_steps(self, scene, params, steps_list, diagnostics=False):
         """One render per step count in ``steps_list``, from ONE propagation -> list of :class:`RenderResult`.
 

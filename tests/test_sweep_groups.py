@@ -114,7 +114,9 @@ class TestWorker:
         ref, floors = load_case_reference(scene)
         res = worker.run_group(str(scene.path), [64, 64], {"N": 8, "steps": 4, "mapping": "collision"},
                                [4, 8, 16], ref, floors)
-        assert [r["status"] for r in res] == ["ok", "failed", "ok"] and "injected" in res[1]["error"]
+        statuses = [r["status"] for r in res]
+        assert statuses == ["ok", "failed", "ok"], [r.get("error") for r in res]
+        assert "injected" in res[1]["error"]
         assert res[0]["shared"]["group_steps"] == [4, 16]
 
 
