@@ -352,14 +352,14 @@ class SSLPVRenderer:
         warnings = []
         t0 = time.perf_counter()
         mode = params.steps if params.steps in STEP_MODES else None
-        res = params.resolved() if mode else None
+        res = params.resolved()
         material = self.lpv_material(scene, params)
         views, centre, radius, w = rsm.light_views(scene)
         warnings += w
         grid = self._grid(params.N, params.precision)
         med = scene.medium
         dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
-        scaled = propagation.upload_material(grid, _with_global_scale(material, params), dx)
+        scaled = propagation.upload_material(grid, _with_global_scale(material, res.radiance_scale), dx)
         host_ms = (time.perf_counter() - t0) * 1e3
         queries = {k: ctx.query(time=True) for k in ("rsm", "injection")}
         stage_wall = {}
@@ -489,7 +489,7 @@ class SSLPVRenderer:
                 normal=np.ascontiguousarray(bufs[3][..., :3]),
                 steps_used=steps_used,
                 diagnostics=diag,
-                calibration=res.calibration if res is not None else params.resolved().calibration,
+                calibration=res.calibration,
             ))
         return results
 
@@ -498,9 +498,8 @@ class SSLPVRenderer:
         return propagation.scale_accumulation(self.ctx, prog, grid)
 
 
-def _with_global_scale(material, params):
-    """The material with the resolved global radiance scale folded into its per-cell one."""
-    r = params.resolved().radiance_scale
+def _with_global_scale(material, r):
+    """The material with the resolved global radiance scale ``r`` folded into its per-cell one."""
     if r == 1.0:
         return material
     out = dict(material)
