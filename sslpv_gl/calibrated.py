@@ -6,8 +6,17 @@
 It writes a TOML file that ``--mapping calibrated:PATH`` reads here::
 
     format = "sslpv-calibrated-mapping"
-    version = 1
+    version = 2
     family = "diffusion"                 # a key of sslpv_gl.material.MAPPINGS
+    [settings]                            # the renderer settings the fit was made with
+    skip = 0                              # (every key of SETTINGS; a render must use the same)
+    outside = "vacuum"
+    resample = "box"
+    lookup = "cell"
+    inject_size = 256
+    inject_offset = 0.0
+    precision = "fp32"
+    eta2 = false
     [fit]                                 # how it was fitted (free-form provenance)
     loss = "mean over scenes of log relMSE(subsurface)"
     [[budget]]
@@ -19,7 +28,11 @@ It writes a TOML file that ``--mapping calibrated:PATH`` reads here::
     radiance_scale_se = 0.01              # reference's two halves
 
 A render at ``(N, steps)`` uses the budget with exactly that ``N`` and ``steps``;
-there is no silent nearest-budget fallback. Every defect of the file is an
+there is no silent nearest-budget fallback. The fitted scales hold only for the
+renderer settings they were fitted with (``[settings]``, :data:`SETTINGS`): a render
+with another ``skip``, ``outside`` and so on is refused (:meth:`Calibrated.check_settings`),
+never silently given scales fitted for something else. Version 1 files, which had no
+``[settings]``, are refused with the fix. Every defect of the file is an
 :class:`~harness.errors.InputError` naming the file, the field and the fix.
 """
 
@@ -34,11 +47,15 @@ from pathlib import Path
 
 from harness.errors import InputError
 
-__all__ = ["FORMAT", "VERSION", "PREFIX", "Budget", "Calibrated", "load_calibrated", "parse_mapping"]
+__all__ = ["FORMAT", "VERSION", "PREFIX", "SETTINGS", "Budget", "Calibrated", "load_calibrated", "parse_mapping"]
 
 FORMAT = "sslpv-calibrated-mapping"
-VERSION = 1
+VERSION = 2
 PREFIX = "calibrated:"
+#: Renderer settings (``SSLPVParams`` fields) that change the subsurface image and so the
+#: fitted scales, with their types: a calibrated file records each, a render must match it.
+SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
+            "inject_offset": float, "precision": str, "eta2": bool}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 
@@ -60,6 +77,17 @@ class Calibrated:
     family: str
     budgets: tuple
     fit: dict
+    settings: dict
+
+    def check_settings(self, params):
+        """InputError naming the first of ``params``' settings that differs from the fitted ones."""
+        for name in SETTINGS:
+            have, want = getattr(params, name), self.settings[name]
+            if have != want:
+                flag = "--" + name.replace("_", "-")
+                raise InputError(flag, name, f"{self.path} was calibrated with {name}={want!r}, this render has "
+                                 f"{name}={have!r}", f"pass {flag} {str(want).lower() if isinstance(want, bool) else want}"
+                                 " with this mapping, or calibrate it again with these settings")
 
     def budget(self, N, steps, where="--mapping"):
         """The parameter set for ``(N, steps)``, or an InputError listing the budgets there are."""
@@ -104,7 +132,7 @@ def _parse(path, data, families):
     if family not in families:
         raise InputError(path, "family", f"{family!r} is not a mapping family of this harness",
                          f"use one of: {', '.join(families)}; {fix}")
-    unknown = set(doc) - {"format", "version", "family", "fit", "budget"}
+    unknown = set(doc) - {"format", "version", "family", "fit", "budget", "settings"}
     if unknown:
         raise InputError(path, sorted(unknown)[0], "is not a field of a calibrated mapping", fix)
     raw = doc.get("budget")
@@ -146,4 +174,27 @@ def _parse(path, data, families):
     fit = doc.get("fit", {})
     if not isinstance(fit, dict):
         raise InputError(path, "fit", "is not a table", fix)
-    return Calibrated(path=path, sha256=sha, family=family, budgets=tuple(budgets), fit=fit)
+    return Calibrated(path=path, sha256=sha, family=family, budgets=tuple(budgets), fit=fit,
+                      settings=_settings(path, doc.get("settings"), fix))
+
+
+def _settings(path, raw, fix):
+    """The ``[settings]`` table: every key of :data:`SETTINGS`, each of its type."""
+    if not isinstance(raw, dict):
+        raise InputError(path, "settings", "is missing or not a table", fix)
+    extra = set(raw) - set(SETTINGS)
+    if extra:
+        raise InputError(path, f"settings.{sorted(extra)[0]}", "is not a renderer setting of a calibration", fix)
+    out = {}
+    for name, kind in SETTINGS.items():
+        if name not in raw:
+            raise InputError(path, f"settings.{name}", "is missing", fix)
+        v = raw[name]
+        ok = isinstance(v, bool) if kind is bool else (
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) if kind is float else
+            isinstance(v, kind) and not isinstance(v, bool))
+        if not ok:
+            raise InputError(path, f"settings.{name}", f"is {v!r}; must be a{'n' if kind is int else ''} "
+                             f"{kind.__name__}", fix)
+        out[name] = float(v) if kind is float else v
+    return out

@@ -109,7 +109,7 @@ class SSLPVParams:
             if self.sigma_scale != 1.0 or self.radiance_scale != 1.0:
                 bad("mapping", "a calibrated mapping brings its own sigma_scale and radiance_scale",
                     "leave --sigma-scale and --radiance-scale at 1 with calibrated:PATH")
-            self.resolved()                          # the file and its budget are checked now
+            self.resolved()                          # the file, its budget and settings are checked now
         if not isinstance(self.eta2, bool):
             bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")
         if isinstance(self.steps, int) and self.skip > self.steps:
@@ -132,6 +132,7 @@ class SSLPVParams:
         if path is None:
             return Resolved(self.mapping, float(self.sigma_scale), float(self.radiance_scale))
         cal = load_calibrated(path, tuple(MAPPINGS))
+        cal.check_settings(self)
         b = cal.budget(self.N, self.steps)
         return Resolved(cal.family, b.sigma_scale, b.radiance_scale,
                         {"path": cal.path, "sha256": cal.sha256, "N": b.N, "steps": b.steps})

@@ -7,10 +7,21 @@ from sslpv_gl.calibrated import load_calibrated, parse_mapping
 
 FAMILIES = ("literal", "collision", "diffusion")
 
+SETTINGS = """[settings]
+skip = 0
+outside = "vacuum"
+resample = "box"
+lookup = "cell"
+inject_size = 256
+inject_offset = 0.0
+precision = "fp32"
+eta2 = false
+"""
+
 GOOD = """format = "sslpv-calibrated-mapping"
-version = 1
+version = 2
 family = "diffusion"
-[fit]
+""" + SETTINGS + """[fit]
 loss = "mean log relMSE"
 [[budget]]
 N = 32
@@ -53,7 +64,13 @@ def test_hash_follows_content(tmp_path):
 
 @pytest.mark.parametrize("text, field", [
     (GOOD.replace('family = "diffusion"', 'family = "magic"'), "family"),
-    (GOOD.replace("version = 1", "version = 2"), "version"),
+    (GOOD.replace("version = 2", "version = 1"), "version"),
+    (GOOD.replace(SETTINGS, ""), "settings"),
+    (GOOD.replace("skip = 0\n", ""), "settings.skip"),
+    (GOOD.replace("skip = 0", "skip = 0.5"), "settings.skip"),
+    (GOOD.replace("eta2 = false", 'eta2 = "no"'), "settings.eta2"),
+    (GOOD.replace("inject_offset = 0.0", "inject_offset = nan"), "settings.inject_offset"),
+    (GOOD.replace("eta2 = false", "eta2 = false\nN = 32"), "settings.N"),
     (GOOD.replace('format = "sslpv-calibrated-mapping"', 'format = "other"'), "format"),
     (GOOD.replace("sigma_scale = 1.5", "sigma_scale = -1.0"), "budget[0].sigma_scale"),
     (GOOD.replace("sigma_scale = 1.5", 'sigma_scale = "big"'), "budget[0].sigma_scale"),
@@ -64,7 +81,7 @@ def test_hash_follows_content(tmp_path):
     (GOOD.replace("sigma_scale_se = 0.01", "sigma_scale_se = -0.01"), "budget[1].sigma_scale_se"),
     (GOOD.replace("radiance_scale = 0.8", "radiance_scale = 0.8\ncolour = 1"), "budget[0].colour"),
     ("extra = 1\n" + GOOD, "extra"),
-    ('format = "sslpv-calibrated-mapping"\nversion = 1\nfamily = "diffusion"\n', "budget"),
+    ('format = "sslpv-calibrated-mapping"\nversion = 2\nfamily = "diffusion"\n' + SETTINGS, "budget"),
     ("this is = = not toml", "toml"),
     (b"\xff\xfe\x00binary", "toml"),
 ])
@@ -87,3 +104,27 @@ def test_missing_budget_names_the_ones_there_are(tmp_path):
     cal = load_calibrated(write(tmp_path, GOOD), FAMILIES)
     with pytest.raises(InputError, match=r"no parameter set for N=16 steps=8.*N=32 steps=8, N=32 steps=steady"):
         cal.budget(16, 8)
+
+
+class TestSettings:
+    """A calibrated file holds only for the renderer settings it was fitted with."""
+
+    def test_params_with_the_fitted_settings_resolve(self, tmp_path):
+        from sslpv_gl.params import SSLPVParams
+
+        p = write(tmp_path, GOOD)
+        r = SSLPVParams(N=32, steps=8, skip=0, mapping=f"calibrated:{p}").resolved()
+        assert (r.family, r.sigma_scale, r.radiance_scale) == ("diffusion", 1.5, 0.8)
+        assert r.calibration["sha256"] == load_calibrated(p, FAMILIES).sha256
+
+    @pytest.mark.parametrize("change, flag", [({"skip": 2}, "--skip"), ({"outside": "absorb"}, "--outside"),
+                                              ({"eta2": True}, "--eta2"), ({"inject_size": 128}, "--inject-size")])
+    def test_other_settings_are_refused_in_one_line(self, tmp_path, change, flag):
+        from sslpv_gl.params import SSLPVParams
+
+        p = write(tmp_path, GOOD)
+        kw = dict(dict(N=32, steps=8, skip=0, mapping=f"calibrated:{p}"), **change)
+        with pytest.raises(InputError) as exc:
+            SSLPVParams(**kw)
+        msg = str(exc.value)
+        assert "\n" not in msg and msg.startswith(f"{flag}: ") and "was calibrated with" in msg and "pass " + flag in msg
