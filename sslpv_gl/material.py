@@ -259,7 +259,7 @@ OUTSIDE_MODES = boundary.OUTSIDE_MODES
 
 
 def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum", eta=1.0,
-                 sigma_scale=1.0):
+                 sigma_scale=1.0, resampled=None):
     """LPV material grids for Sec. 3.2 -> dict of float32 (N, N, N, 3).
 
     Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``),
@@ -271,7 +271,8 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     :data:`sslpv_gl.boundary.OUTSIDE_MODES`; ``eta`` (the boundary's index)
     sets the extrapolation distance of ``extrapolated``; ``sigma_scale``
     multiplies the mapped ``sigma_lpv`` (a calibrated free parameter,
-    :mod:`sslpv_gl.calibrated`). Other parameters: the module docstring.
+    :mod:`sslpv_gl.calibrated`); ``resampled`` is ``resample_medium(medium, N,
+    resample)`` when the caller already has it. Other parameters: the module docstring.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
     _check_choice(resample, RESAMPLERS, "resample")
@@ -289,7 +290,7 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
         )
     dx = float(dxs[0])
 
-    sigma_t, albedo, g_medium = resample_medium(medium, N, resample)
+    sigma_t, albedo, g_medium = resampled if resampled is not None else resample_medium(medium, N, resample)
     mapped = map_material_full(sigma_t, albedo, g_medium, dx, mapping)
     sigma_lpv, g = mapped["sigma_lpv"], mapped["g"]
     if sigma_scale != 1.0:
