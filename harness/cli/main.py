@@ -10,13 +10,14 @@ import argparse
 import json
 import sys
 
-from harness.cli import baselines, compare, export, nightly, reference, render, report, scenes, sweep
+from harness.cli import baselines, calibrate, compare, export, nightly, reference, render, report, scenes, sweep
 from harness.errors import EnvironmentProblem, InputError
 
 #: ``(name, module)`` of every command, in the order ``--help`` lists them.
 COMMANDS = [
     ("scenes", scenes), ("reference", reference), ("render", render), ("compare", compare),
     ("sweep", sweep), ("report", report), ("export", export), ("nightly", nightly), ("baselines", baselines),
+    ("calibrate", calibrate),
 ]
 
 
@@ -43,6 +44,7 @@ def build_parser():
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)      # what a command records as its own command line
     try:
         result, text, code = args.func(args)
         _emit(args, result, text)

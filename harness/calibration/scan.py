@@ -1,0 +1,106 @@
+"""GL renders for a calibration: one scene at every budget for one ``sigma_scale``, memoised.
+
+A calibration renders each scene many times: at every sampled ``sigma_scale`` of the scan,
+at every budget ``(N, steps)``, then again at each fitted optimum. :class:`Scanner` does it
+with the fewest GL calls: for one grid ``N`` the integer step counts come from ONE
+:meth:`~sslpv_gl.renderer.SSLPVRenderer.render_steps` propagation (bit-identical to
+rendering each count alone), and ``steps = "steady"`` is its own solve. Each result goes
+into the :class:`~harness.calibration.fit.SceneSamples` of its (budget, scene), and the
+subsurface image itself is kept for the figures that are computed from full images.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from harness.calibration.fit import SceneSamples
+
+__all__ = ["Scanner", "budget_label"]
+
+
+def budget_label(N, steps):
+    return f"N={N} steps={steps}"
+
+
+class Scanner:
+    """Renders of ``scenes`` (name -> Scene) against ``refs`` (name -> reference arrays).
+
+    ``base`` is an :class:`~sslpv_gl.params.SSLPVParams` with the family's mapping and
+    settings; ``budgets`` a list of ``(N, steps)``. ``progress`` (a
+    :class:`harness.progress.Progress`) is advanced once per scene render.
+    """
+
+    def __init__(self, renderer, scenes, refs, base, budgets, progress=None, label=None):
+        self.renderer, self.scenes, self.refs, self.base = renderer, scenes, refs, base
+        self.label = label or base.mapping              # names the renders in the progress lines
+        self.budgets = list(budgets)
+        self.progress = progress
+        self.samples = {}                 # (budget, scene) -> SceneSamples
+        self.images = {}                  # (budget, scene, s) -> full subsurface image (H, W, 3)
+        self.failures = []                # (scene, budget, s, error)
+        self.renders, self.seconds = 0, 0.0
+        for b in self.budgets:
+            for name, ref in refs.items():
+                m = ref["mask"]
+                self.samples[(b, name)] = SceneSamples(name, {k: np.asarray(ref[k], np.float64)[m].ravel()
+                                                               for k in ("subsurface", "half_a", "half_b")})
+                # SceneSamples names the full reference "full"
+                self.samples[(b, name)].refs["full"] = self.samples[(b, name)].refs.pop("subsurface")
+
+    def samples_for(self, budget, names):
+        return [self.samples[(budget, n)] for n in names]
+
+    def has(self, budget, name, s):
+        return (budget, name, float(s)) in self.images
+
+    def render(self, name, s, budgets=None):
+        """Render scene ``name`` at ``sigma_scale = s`` for ``budgets`` (default: all), unless done before."""
+        s = float(s)
+        want = [b for b in (budgets or self.budgets) if (b, name, s) not in self.images]
+        by_n = {}
+        for N, steps in want:
+            by_n.setdefault(N, []).append(steps)
+        for N, steps_list in by_n.items():
+            ints = sorted(k for k in steps_list if not isinstance(k, str))
+            modes = [k for k in steps_list if isinstance(k, str)]
+            if ints:
+                self._run(name, s, N, ints)
+            for k in modes:
+                self._run(name, s, N, [k])
+
+    def image(self, budget, name, s):
+        return self.images.get((budget, name, float(s)))
+
+    def _run(self, name, s, N, steps_list):
+        scene = self.scenes[name]
+        params = self.base.replace(N=N, steps=steps_list[-1], sigma_scale=s)
+        t0 = time.perf_counter()
+        try:
+            if len(steps_list) > 1:
+                results = self.renderer.render_steps(scene, params, steps_list)
+            else:
+                results = [self.renderer.render(scene, params)]
+        except (ValueError, FloatingPointError) as exc:   # no steady state at this scale: not a sample
+            for k in steps_list:
+                self.failures.append((name, (N, k), s, str(exc).splitlines()[0]))
+            results = None
+        self.seconds += time.perf_counter() - t0
+        self.renders += 1
+        if self.progress is not None:
+            if self.progress.total is not None and self.progress.done >= self.progress.total:
+                self.progress.update(total=self.progress.done + 1)      # refinement renders more than planned
+            self.progress.advance(detail=f"{self.label}: {name} {budget_label(N, '/'.join(map(str, steps_list)))} "
+                                         f"sigma_scale={s:.4g}")
+        if results is None:
+            return
+        mask = self.refs[name]["mask"]
+        for k, res in zip(steps_list, results):
+            img = np.asarray(res.subsurface, dtype=np.float64)
+            if not np.all(np.isfinite(img)):
+                self.failures.append((name, (N, k), s, f"{int(np.count_nonzero(~np.isfinite(img)))} non-finite "
+                                      "pixels"))
+                continue
+            self.images[((N, k), name, s)] = img
+            self.samples[((N, k), name)].add(s, img[mask].ravel())
