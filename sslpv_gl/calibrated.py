@@ -47,7 +47,8 @@ from pathlib import Path
 
 from harness.errors import InputError
 
-__all__ = ["FORMAT", "VERSION", "PREFIX", "SETTINGS", "Budget", "Calibrated", "load_calibrated", "parse_mapping"]
+__all__ = ["FORMAT", "VERSION", "PREFIX", "SETTINGS", "Budget", "Calibrated", "load_calibrated", "parse_mapping",
+           "resolve_path"]
 
 FORMAT = "sslpv-calibrated-mapping"
 VERSION = 2
@@ -106,9 +107,25 @@ def parse_mapping(mapping):
     return None
 
 
+#: The repository this module sits in: relative calibrated paths not found from the current
+#: folder are looked up here, so the committed mappings (``baselines/calibrated/``) keep one
+#: portable name in matrices, configuration labels and baselines on every checkout.
+_REPO = Path(__file__).resolve().parent.parent
+
+
+def resolve_path(path):
+    """A calibrated mapping's path: as given when absolute or present from the current folder, else
+    relative to the repository (where the committed mappings are); unchanged when neither exists."""
+    p = Path(path)
+    if p.is_absolute() or p.exists():
+        return p
+    in_repo = _REPO / p
+    return in_repo if in_repo.exists() else p
+
+
 def load_calibrated(path, families):
     """Read and validate a calibrated mapping file -> :class:`Calibrated` (cached by path and content)."""
-    p = Path(path)
+    p = resolve_path(path)
     if not p.is_file():
         raise InputError(p, "file", "does not exist" if not p.exists() else "is not a file",
                          "give a file written by `sslpv-harness calibrate`")

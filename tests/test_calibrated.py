@@ -1,5 +1,7 @@
 """sslpv_gl.calibrated: the calibrated-mapping file, its budgets, and one line for every defect."""
 
+from pathlib import Path
+
 import pytest
 
 from harness.errors import InputError
@@ -128,3 +130,25 @@ class TestSettings:
             SSLPVParams(**kw)
         msg = str(exc.value)
         assert "\n" not in msg and msg.startswith(f"{flag}: ") and "was calibrated with" in msg and "pass " + flag in msg
+
+
+def test_a_relative_path_is_found_from_the_repository(tmp_path, monkeypatch):
+    """Matrices name committed mappings relative to the repository; that works from any folder."""
+    import shutil
+
+    from sslpv_gl.calibrated import _REPO, resolve_path
+
+    folder = _REPO / "test-artifacts" / "calibrated-resolve"
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        (folder / "c.toml").write_text(GOOD)
+        monkeypatch.chdir(tmp_path)
+        rel = "test-artifacts/calibrated-resolve/c.toml"
+        assert resolve_path(rel) == folder / "c.toml"
+        assert load_calibrated(rel, FAMILIES).path == str(folder / "c.toml")
+        (tmp_path / "test-artifacts" / "calibrated-resolve").mkdir(parents=True)
+        (tmp_path / rel).write_text(GOOD.replace("1.5", "1.7"))      # the current folder's comes first
+        assert load_calibrated(rel, FAMILIES).budget(32, 8).sigma_scale == 1.7
+        assert resolve_path("no/such.toml") == Path("no/such.toml")
+    finally:
+        shutil.rmtree(folder)

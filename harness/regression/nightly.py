@@ -52,8 +52,6 @@ def load_matrix(path):
 
 def _product(path, where, raw):
     """One ``[params]`` or ``[[also]]`` table -> typed lists (every combination is rendered)."""
-    from harness import paths
-
     if not isinstance(raw, dict):
         raise InputError(path, where, "must be a table", f"write [{where}] with lists of values")
     unknown = set(raw) - set(CLI_TO_FIELD)
@@ -63,13 +61,9 @@ def _product(path, where, raw):
     for k, v in raw.items():
         if not isinstance(v, list) or not v:
             raise InputError(path, f"{where}.{k}", "must be a non-empty list", f"write e.g. {k} = [8, 16]")
-    lists = parse_lists(raw)
-    # a calibrated mapping named relative to the repository works from any folder
-    if "mapping" in lists:
-        lists["mapping"] = [f"calibrated:{paths.REPO / m[len('calibrated:'):]}"
-                            if m.startswith("calibrated:") and not Path(m[len("calibrated:"):]).is_absolute()
-                            else m for m in lists["mapping"]]
-    return lists
+    # a relative calibrated:PATH stays as written (portable labels and baselines); it is found from the
+    # current folder or the repository (sslpv_gl.calibrated.resolve_path)
+    return parse_lists(raw)
 
 
 def rows_for_run(store, run_id):
