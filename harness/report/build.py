@@ -218,6 +218,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
     else:
         gk = plots.grid_key(cs_plot)
         gridded = plots.has_axes(cs_plot, "steps", gk)
+        refined = len({plots.num(c["params"].get(gk)) for c in cs_plot} - {None}) > 1
         for image, metric in PLOT_METRICS:
             if not any(plots.value(c, image, metric) is not None for c in cs_plot):
                 plot_notes.append(f"No {metric} ({image}) values: its plots are left out.")
@@ -229,11 +230,13 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs steps",
                                   "caption": f"{metric} ({image}) vs propagation steps, one line per grid "
                                              f"resolution {gk}; dotted: median noise floor."})
+            if refined:        # grid refinement: also for steps = steady or auto alone
                 p = plot_dir / f"{tag}_vs_grid.png"
                 plots.error_vs_param(cs_plot, image, metric, p, gk, "steps")
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs grid",
                                   "caption": f"{metric} ({image}) vs grid resolution {gk}, one line per step "
-                                             f"count."})
+                                             f"count (steady: the converged accumulation)."})
+            if gridded:
                 p = plot_dir / f"{tag}_heatmap.png"
                 plots.heatmap(cs_plot, image, metric, p)
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} heat map",

@@ -81,15 +81,23 @@ def facets(configs):
     return dict(sorted(out.items()))
 
 
+def _line_value(v):
+    """A line's key: a number, or a word such as ``steady`` or ``auto`` for ``steps`` (its own line)."""
+    n = num(v)
+    return v if n is None and isinstance(v, str) else n
+
+
 def _series(configs, x_param, line_param, image, metric):
-    """``{line value: sorted [(x, y)]}``; configurations lacking either parameter are left out."""
+    """``{line value: sorted [(x, y)]}``, numeric lines first, then named ones (``steps = steady``);
+    configurations lacking either parameter are left out."""
     lines = defaultdict(list)
     for c in configs:
-        x, ln, y = num(c["params"].get(x_param)), num(c["params"].get(line_param)), value(c, image, metric)
+        x, ln, y = num(c["params"].get(x_param)), _line_value(c["params"].get(line_param)), value(c, image, metric)
         if x is None or ln is None or y is None:
             continue
         lines[ln].append((x, y))
-    return {k: sorted(v) for k, v in sorted(lines.items())}
+    order = sorted(lines, key=lambda k: (isinstance(k, str), k if isinstance(k, str) else float(k)))
+    return {k: sorted(lines[k]) for k in order}
 
 
 def grid_key(configs):
@@ -156,7 +164,7 @@ def error_vs_param(configs, image, metric, path, x_param="steps", line_param="N"
         for ln, pts in _series(cs, x_param, line_param, image, metric).items():
             xs, yv = zip(*pts)
             ys += yv
-            ax.plot(xs, yv, "o-", label=f"{line_param} {ln:g}")
+            ax.plot(xs, yv, "o-", label=f"{line_param} {ln if isinstance(ln, str) else format(ln, 'g')}")
         _floor_line(ax, cs, image, metric)
         ax.set_title(label, fontsize=9)
         ax.set_xlabel(x_param)
