@@ -71,3 +71,13 @@ def test_reseeded_reference_does_not_fail(renderer, tmp_path, scene):
 def test_reseeded_references_exist():
     """The meta-test above must run on at least two scenes, not silently on none."""
     assert RESEEDED.is_dir() and len(list(RESEEDED.iterdir())) >= 2
+
+
+def test_matrix_also_tables_add_cases_once():
+    """[[also]] tables add further products to the accuracy matrix; a case already there is not repeated."""
+    from harness.regression.accuracy import cases
+
+    m = {"scenes": ["thin_ring"], "params": {"grid": [16], "steps": [8], "mapping": ["collision"]},
+         "also": [{"grid": [16, 32], "steps": [8], "mapping": ["collision", "diffusion"], "skip": [2]}]}
+    got = [(p.N, p.mapping, p.skip) for _, p, _ in cases(m)]
+    assert got == [(16, "collision", 2), (16, "diffusion", 2), (32, "collision", 2), (32, "diffusion", 2)]

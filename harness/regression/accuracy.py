@@ -57,7 +57,10 @@ class CaseResult:
 def cases(matrix=None):
     """(scene name, SSLPVParams, tolerance) for every case of the accuracy matrix."""
     matrix = matrix or load_matrix()
-    params = expand(parse_lists(matrix["params"]))
+    # [params] and each [[also]] table are cartesian products; a case appears once
+    params = []
+    for table in [matrix["params"]] + list(matrix.get("also", [])):
+        params += [p for p in expand(parse_lists(table)) if p not in params]
     default_tol = matrix.get("tolerance", {}).get("default", {"rel": 0.03, "abs": 1e-4})
     out = []
     for scene in matrix["scenes"]:
