@@ -188,3 +188,26 @@ def test_halves_standard_error_matches_the_spread_of_independent_references():
     rms = float(np.sqrt(np.mean(np.square(est))))
     # 100 realisations: each side has a Monte Carlo error of about 7 to 10 %
     assert rms == pytest.approx(sd, rel=0.2), (rms, sd)
+
+
+def test_limits_name_the_family_or_the_disagreement():
+    """run._limits: a scene the family cannot fit even alone is the family's limit; one it fits alone but
+    not with the others' parameters is the scenes' disagreement; the oracle's spread is reported."""
+    from harness.calibration.run import _limits, _targets
+
+    def v(rel, energy, s, r, at_bound=False):
+        return {"relmse": rel, "energy_ratio": energy, "s": s, "r": r, "at_bound": at_bound}
+
+    res = {"held_out": {"a": v(0.2, 0.5, 2.0, 1.0), "b": v(0.3, 0.6, 1.0, 1.0), "c": v(0.05, 1.0, 1.5, 1.0)},
+           "oracle": {"a": v(0.03, 0.95, 8.0, 0.7), "b": v(0.2, 0.7, 1.0, 2.0, True), "c": v(0.04, 1.0, 1.5, 1.0)}}
+    compared = {"literal": {n: {"relmse": 0.4} for n in "abc"}, "collision": {n: {"relmse": 0.1} for n in "abc"}}
+    lim = _limits(res, compared)
+    why = {r["scene"]: r["why"] for r in lim["scenes"]}
+    assert set(why) == {"a", "b"}
+    assert why["a"].startswith("the scenes disagree") and why["b"].startswith("the family itself")
+    assert lim["oracle_sigma_scale"] == {"min": 1.0, "min_scene": "b", "max": 8.0, "max_scene": "a", "at_bound": ["b"]}
+    assert lim["oracle_energy_outside"] == {"b": 0.7}
+    assert lim["median_oracle_relmse"] == 0.04 and lim["oracle_relmse_met"]        # 0.04 <= 0.5 x 0.1
+    t = _targets(res, compared)
+    assert not t["energy_met"] and set(t["energy_outside"]) == {"a", "b"}
+    assert t["median_held_out_relmse"] == 0.2 and not t["relmse_met"]

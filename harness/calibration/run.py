@@ -245,7 +245,7 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
     for label, res in results.items():
         res["compared"] = compared[label]
         res["targets"] = _targets(res, compared[label])
-        res["limits"] = _limits(res)
+        res["limits"] = _limits(res, compared[label])
     wall = time.perf_counter() - t_start
     info = {
         "format": "sslpv-calibration-report", "family": fam.name, "mapping": fam.mapping, "doc": fam.doc,
@@ -328,12 +328,14 @@ def _targets(res, compared):
                            and med_held <= RELMSE_TARGET_FACTOR * better)}
 
 
-def _limits(res):
-    """What stops a target, from the measurements: the family's own best (the oracle) against held-out."""
+def _limits(res, compared):
+    """What stops a target, from the measurements: each scene's oracle (the family at its best for that
+    scene alone) against its held-out result, and how far apart the scenes' own optima lie."""
     lo, hi = ENERGY_TARGET
+    oracle, held = res["oracle"], res["held_out"]
     rows = []
-    for n, h in res["held_out"].items():
-        o = res["oracle"][n]
+    for n, h in held.items():
+        o = oracle[n]
         if h["energy_ratio"] is None or lo <= h["energy_ratio"] <= hi:
             continue
         if o["energy_ratio"] is None or not lo <= o["energy_ratio"] <= hi:
@@ -346,7 +348,24 @@ def _limits(res):
                    f"it gets {h['s']:.3g}, {h['r']:.3g}")
         rows.append({"scene": n, "held_out_energy": h["energy_ratio"], "oracle_energy": o["energy_ratio"],
                      "why": why})
-    return rows
+    ok = {n: o for n, o in oracle.items() if o["relmse"] is not None}
+
+    def spread(key):
+        if not ok:
+            return None
+        lo_n, hi_n = min(ok, key=lambda n: ok[n][key]), max(ok, key=lambda n: ok[n][key])
+        return {"min": ok[lo_n][key], "min_scene": lo_n, "max": ok[hi_n][key], "max_scene": hi_n,
+                "at_bound": sorted(n for n, o in ok.items() if o["at_bound"]) if key == "s" else []}
+
+    med = {m: _median(v["relmse"] for v in compared[m].values()) for m in ("literal", "collision")}
+    known = [v for v in med.values() if v is not None]
+    med_oracle = _median(o["relmse"] for o in ok.values())
+    return {"scenes": rows, "oracle_sigma_scale": spread("s"), "oracle_radiance_scale": spread("r"),
+            "oracle_energy_outside": {n: o["energy_ratio"] for n, o in ok.items()
+                                      if o["energy_ratio"] is None or not lo <= o["energy_ratio"] <= hi},
+            "median_oracle_relmse": med_oracle,
+            "oracle_relmse_met": (med_oracle is not None and bool(known)
+                                  and med_oracle <= RELMSE_TARGET_FACTOR * min(known))}
 
 
 # ----------------------------------------------------------------------------- output

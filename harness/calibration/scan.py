@@ -90,7 +90,7 @@ class Scanner:
         self.renders += 1
         if self.progress is not None:
             if self.progress.total is not None and self.progress.done >= self.progress.total:
-                self.progress.update(total=self.progress.done + 1)      # refinement renders more than planned
+                self.progress.total = self.progress.done + 1            # refinement renders more than planned
             self.progress.advance(detail=f"{self.label}: {name} {budget_label(N, '/'.join(map(str, steps_list)))} "
                                          f"sigma_scale={s:.4g}")
         if results is None:
