@@ -195,12 +195,22 @@ def reference_dir(scene, target=None):
 # --------------------------------------------------------------------------- cluster
 
 class ReleaseGL(WorkerPlugin):
-    """Dask worker plugin: each worker releases its GL context when it closes."""
+    """Dask worker plugin: load pymeshlab on the worker's main thread; release the GL context at close.
+
+    ``setup`` runs on the worker's main (event-loop) thread. Importing :mod:`harness.scene`
+    there loads pymeshlab, and with it MeshLab's Qt plugins, before any task runs. Left to
+    the first task, the import happens on Dask's executor thread, and the plugins' QObjects
+    then belong to that thread. At process exit, MeshLab's static ``PluginManager``
+    unloads them after Qt has freed that thread's ``QThreadData``. That use-after-free
+    (valgrind: ``QThreadData::deref`` in ``~QObjectPrivate`` from ``~PluginManager``)
+    corrupts the heap, and glibc aborts the worker with ``malloc_consolidate(): unaligned
+    fastbin chunk detected``. It happened in 10 of 10 small sweeps before this.
+    """
 
     name = "sslpv-release-gl"
 
     def setup(self, worker):
-        pass
+        import harness.scene  # noqa: F401  (loads pymeshlab on this, the main, thread)
 
     def teardown(self, worker):
         from harness.runs import worker as sweep_worker

@@ -23,6 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+# Imported here, not lazily inside a function: the first import loads MeshLab's Qt plugins,
+# and they must be loaded on a process's main thread (see harness.runs.sweep.ReleaseGL).
+import pymeshlab
 
 from harness.errors import InputError
 
@@ -115,8 +118,6 @@ def _box(size, center):
 
 def build_mesh(spec, where, scene_dir):
     """Build the mesh described by the ``[mesh]`` table; refuse open meshes."""
-    import pymeshlab
-
     kind = spec.get("kind")
     if kind not in MESH_KINDS:
         raise InputError(where, "mesh.kind", f"unknown kind {kind!r}", f"use one of: {', '.join(MESH_KINDS)}")
@@ -166,8 +167,6 @@ def build_mesh(spec, where, scene_dir):
 
 def check_closed(vertices, faces, where):
     """Raise unless the mesh (after welding coincident vertices) is closed and two-manifold."""
-    import pymeshlab
-
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces))
     ms.meshing_merge_close_vertices(threshold=pymeshlab.PercentageValue(1e-4))
