@@ -1,6 +1,7 @@
 """Nightly job: verdict arithmetic, and two small nights end to end (64x64, committed references)."""
 
 import json
+import re
 import sqlite3
 
 import pytest
@@ -88,7 +89,7 @@ def test_bad_matrix_is_one_line(tmp_path, capsys):
     assert main(["nightly", "--matrix", str(matrix), "--store", str(tmp_path / "s.sqlite"),
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "params.colour: is not a renderer parameter" in err[0]
+    assert len(err) == 1 and "params.colour: is not a known field" in err[0]
     assert not (tmp_path / "s.sqlite").exists()
 
 
@@ -101,13 +102,15 @@ def test_matrix_also_products(tmp_path):
     m = tmp_path / "m.toml"
     m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4, 8]\nmapping = ["collision"]\n'
                  '[[also]]\ngrid = [8]\nsteps = [8, "steady"]\nmapping = ["diffusion", "calibrated:x/c.toml"]\n')
+    # The calibrated file is looked up at load time (from here, else the repository) and refused when missing.
+    with pytest.raises(InputError, match=re.escape("x/c.toml: file: does not exist")):
+        load_matrix(m)
+    m.write_text(m.read_text().replace(', "calibrated:x/c.toml"', ""))
     params = load_matrix(m)["params"]
     assert isinstance(params, list) and len(params) == 2
-    assert params[1]["mapping"][1] == "calibrated:x/c.toml"
-    params[1]["mapping"] = ["diffusion"]            # the file does not exist; the union is what is tested
     configs = expand_all(params)
     assert [(c.steps, c.mapping) for c in configs] == [(4, "collision"), (8, "collision"), (8, "diffusion"),
                                                        ("steady", "diffusion")]
     m.write_text('[params]\ngrid = [8]\n[[also]]\ngridd = [8]\n')
-    with pytest.raises(InputError, match=r"also\[0\]\.gridd: is not a renderer parameter"):
+    with pytest.raises(InputError, match=r"also\[0\]\.gridd: is not a known field"):
         load_matrix(m)

@@ -194,9 +194,9 @@ class TestBadMeshFields:
         ("subdivisions = 4", 'subdivisions = "x"', r"mesh\.subdivisions: must be an integer"),
         ("subdivisions = 4", "subdivisions = 9", r"mesh\.subdivisions: must be an integer in \[1, 6\]"),
         ('kind = "sphere"\nradius = 1.0\nsubdivisions = 4', 'kind = "torus"\nsegments = 5',
-         r"mesh\.segments: must be two integers"),
+         r"mesh\.segments: must be a list of 2 integers in \[3, 1024\]"),
         ('kind = "sphere"\nradius = 1.0\nsubdivisions = 4', 'kind = "torus"\nrotate_x_deg = "a"',
-         r"mesh\.rotate_x_deg: must be a finite number"),
+         r"mesh\.rotate_x_deg: must be a number"),
         ('tags = ["homogeneous", "high-albedo"]', 'tags = "abc"', r"tags: must be a list of strings"),
         ("bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [1.05, 1.05, 2.05]", r"medium\.bbox_max: .*not a cube"),
     ])

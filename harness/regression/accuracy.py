@@ -61,7 +61,7 @@ def cases(matrix=None):
     params = []
     for table in [matrix["params"]] + list(matrix.get("also", [])):
         params += [p for p in expand(parse_lists(table)) if p not in params]
-    default_tol = matrix.get("tolerance", {}).get("default", {"rel": 0.03, "abs": 1e-4})
+    default_tol = dict({"rel": 0.03, "abs": 1e-4}, **matrix.get("tolerance", {}).get("default", {}))
     out = []
     for scene in matrix["scenes"]:
         tol = dict(default_tol, **matrix.get("tolerance", {}).get(scene, {}))

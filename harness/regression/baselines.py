@@ -23,17 +23,21 @@ Commands (``sslpv-harness baselines ...``):
 
 import json
 import shutil
-import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
+from pydantic import Field, model_validator
 
 from harness.io.atomic import atomic_dir, atomic_write
 from harness import paths
 from harness.errors import InputError
 from harness.reference import committed
+from harness.regression.verdict import ToleranceSpec
+from harness.runs.params import param_lists_model
 from harness.scene import list_scenes, load_scene, scene_path
+from harness.validation import FieldProblem, InputModel, read_toml, validate
 
 REPO = paths.REPO
 BASELINE_DIR = paths.BASELINE_DIR
@@ -50,13 +54,39 @@ def baseline_path(scene_name):
     return BASELINE_DIR / f"{scene_name}.json"
 
 
+class AccuracyMatrix(InputModel):
+    """``baselines/accuracy_matrix.toml``: the scenes and configurations of ``pytest -m accuracy``."""
+
+    scenes: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)] = Field(
+        description="suite scenes", examples=[["sphere_homogeneous", "jade_veins"]])
+    params: param_lists_model("cli") = Field(description="every combination is a case")
+    also: list[param_lists_model("cli")] = Field([], description="further products, as [[also]] tables")
+    tolerance: dict[str, ToleranceSpec] = Field(
+        {}, description="[tolerance.default] and [tolerance.<scene>] (a scene's keys override the default's)")
+
+    @model_validator(mode="after")
+    def _tolerance_names_a_scene(self):
+        for key in self.tolerance:
+            if key != "default" and key not in self.scenes:
+                raise FieldProblem(("tolerance", key), "names no scene of the matrix",
+                                   f"use [tolerance.default] or one of: {', '.join(self.scenes)}")
+        return self
+
+
 def load_matrix(path=MATRIX_FILE):
-    """The accuracy-test matrix: scenes, configurations and per-test tolerances."""
+    """The accuracy-test matrix, validated: ``{"scenes", "params" (command-line names -> lists),
+    "tolerance" ({"default" or scene: {"rel", "abs"}})}``."""
+    from harness.runs.params import check_products, product_dict
+    from harness.runs.sweep import resolve_scenes
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "file", "does not exist", "restore baselines/accuracy_matrix.toml")
-    data = tomllib.loads(path.read_text())
-    return data
+    m = validate(AccuracyMatrix, read_toml(path, "a matrix file", "restore baselines/accuracy_matrix.toml"), path)
+    resolve_scenes(m.scenes, where=path, field="scenes")
+    for i, table in enumerate([m.params, *m.also]):
+        check_products(product_dict(table), path, "params" if i == 0 else f"also[{i - 1}]")
+    return {"scenes": list(m.scenes), "params": m.params.model_dump(exclude_none=True),
+            "also": [t.model_dump(exclude_none=True) for t in m.also],
+            "tolerance": {k: t.model_dump(exclude_none=True) for k, t in m.tolerance.items()}}
 
 
 def read_baseline(scene_name, check_scene=True):

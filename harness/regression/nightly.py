@@ -12,58 +12,54 @@
 """
 
 import json
-import tomllib
 from datetime import date as _date
 from pathlib import Path
+from typing import Annotated, Literal, Optional, Union
+
+from pydantic import Field
 
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.errors import InputError
-from harness.runs.params import CLI_TO_FIELD, config_label, parse_lists
+from harness.runs.params import check_products, config_label, param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
-from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, compare_rows, overall
+from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, compare_rows, overall
+from harness.validation import ImageSize, InputModel, read_toml, validate
 
 TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
 
 
+_PRODUCT = param_lists_model("cli")
+
+
+class NightlyMatrix(InputModel):
+    """``harness/regression/nightly_matrix.toml``: what the nightly job renders, and its tolerance."""
+
+    scenes: Union[Literal["all"], Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]] = Field(
+        "all", description='"all", or a list of suite scene names', examples=[["thin_ring", "jade_veins"]])
+    size: Optional[Annotated[list[ImageSize], Field(min_length=2, max_length=2)]] = Field(
+        None, description="image size [W, H]; default: each scene's own", examples=[[128, 128]])
+    params: _PRODUCT = Field(default_factory=_PRODUCT, description="every combination is rendered")
+    also: list[_PRODUCT] = Field([], description="further products, as [[also]] tables")
+    tolerance: ToleranceSpec = Field(default_factory=ToleranceSpec)
+
+
 def load_matrix(path):
-    """Read and validate the standard matrix file."""
-    from harness.runs.sweep import parse_size, resolve_scenes
+    """Read and validate the standard matrix file: types by :class:`NightlyMatrix`, renderer values
+    by SSLPVParams, scene names by the suite, each bad one named by its key."""
+    from harness.runs.sweep import resolve_scenes
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "file", "does not exist", "give the nightly matrix file (harness/regression/nightly_matrix.toml)")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(path, "toml", f"is not valid TOML ({exc})", "fix the syntax") from exc
-    scenes = data.get("scenes", "all")
-    scenes = list_scenes() if scenes == "all" else resolve_scenes(scenes)
-    params = _product(path, "params", data.get("params", {}))
-    also = data.get("also", [])
-    if not isinstance(also, list) or not all(isinstance(t, dict) for t in also):
-        raise InputError(path, "also", "must be [[also]] tables", "write each extra product as an [[also]] table")
-    if also:
-        params = [params] + [_product(path, f"also[{i}]", t) for i, t in enumerate(also)]
-    size = data.get("size")
-    size = parse_size(f"{size[0]}x{size[1]}") if size else None
-    tol = dict(DEFAULT_TOLERANCE, **data.get("tolerance", {}))
-    return {"scenes": scenes, "params": params, "size": size, "tolerance": tol, "path": str(path)}
-
-
-def _product(path, where, raw):
-    """One ``[params]`` or ``[[also]]`` table -> typed lists (every combination is rendered)."""
-    if not isinstance(raw, dict):
-        raise InputError(path, where, "must be a table", f"write [{where}] with lists of values")
-    unknown = set(raw) - set(CLI_TO_FIELD)
-    if unknown:
-        raise InputError(path, f"{where}.{sorted(unknown)[0]}", "is not a renderer parameter",
-                         f"use: {', '.join(CLI_TO_FIELD)}")
-    for k, v in raw.items():
-        if not isinstance(v, list) or not v:
-            raise InputError(path, f"{where}.{k}", "must be a non-empty list", f"write e.g. {k} = [8, 16]")
-    # a relative calibrated:PATH stays as written (portable labels and baselines); it is found from the
-    # current folder or the repository (sslpv_gl.calibrated.resolve_path)
-    return parse_lists(raw)
+    m = validate(NightlyMatrix, read_toml(path, "a matrix file", "give the nightly matrix file "
+                                                "(harness/regression/nightly_matrix.toml)"), path)
+    scenes = list_scenes() if m.scenes == "all" else resolve_scenes(m.scenes, where=path, field="scenes")
+    products = [product_dict(t) for t in [m.params, *m.also]]
+    for i, lists in enumerate(products):
+        # a relative calibrated:PATH stays as written (portable labels and baselines); it is found from the
+        # current folder or the repository (sslpv_gl.calibrated.resolve_path), and checked now
+        check_products(lists, path, "params" if i == 0 else f"also[{i - 1}]")
+    params = products if m.also else products[0]
+    return {"scenes": scenes, "params": params, "size": m.size, "tolerance": m.tolerance.over(DEFAULT_TOLERANCE),
+            "path": str(path)}
 
 
 def rows_for_run(store, run_id):

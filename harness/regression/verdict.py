@@ -17,6 +17,11 @@ as missed regressions, so both the floors and the tolerance are always added.
 """
 
 from dataclasses import asdict, dataclass
+from typing import Optional
+
+from pydantic import Field
+
+from harness.validation import InputModel, NonNegative
 
 # The metrics a verdict is based on; the others are reported, never judged.
 HEADLINE = ("relmse", "si_relmse", "energy_ratio", "flip")
@@ -86,3 +91,16 @@ def overall(changes):
         if v in verdicts:
             return v
     return "unchanged"
+
+
+# ----------------------------------------------------------------- the tolerance tables of the matrices
+
+class ToleranceSpec(InputModel):
+    """A ``[tolerance]`` table of a matrix file; a key left out keeps the default's value."""
+
+    rel: Optional[NonNegative] = Field(None, description="fraction of the old badness", examples=[0.05])
+    abs: Optional[NonNegative] = Field(None, description="absolute, in the metric's units", examples=[1e-4])
+
+    def over(self, defaults):
+        """This table on top of ``defaults`` (a dict with ``rel`` and ``abs``)."""
+        return dict(defaults, **self.model_dump(exclude_none=True))

@@ -1,15 +1,27 @@
-"""Renderer parameters on the command line: ``--grid 16,32`` -> typed lists.
+"""Renderer parameters on the command line and in files: ``--grid 16,32`` -> typed lists.
 
 The command-line names are the ones users know from the paper (``--grid`` for
 the LPV resolution N); each maps onto one field of
 :class:`sslpv_gl.params.SSLPVParams`, whose own validation decides what is
 allowed.
+
+In files a product of parameter lists is a typed model made from
+:class:`~sslpv_gl.params.SSLPVParams` itself (:func:`param_lists_model`): keyed by the
+command-line names in the TOML matrices (``grid = [16, 32]``), by the field names in a
+sweep's ``sweep.json`` (``"N": [16, 32]``). A new renderer parameter appears in both
+without a change here; :func:`check_products` then lets ``SSLPVParams`` judge every value
+and names the file and the key of a bad one.
 """
 
 import dataclasses
+import functools
 import itertools
+from typing import Annotated, Optional, Union
+
+from pydantic import Field, create_model
 
 from harness.errors import InputError
+from harness.validation import InputModel
 
 # command-line name -> SSLPVParams field
 CLI_TO_FIELD = {
@@ -26,6 +38,51 @@ def _field_types():
     from sslpv_gl.params import SSLPVParams
 
     return {f.name: f.type for f in dataclasses.fields(SSLPVParams)}
+
+
+#: SSLPVParams field type (as written in the dataclass) -> the type of one value in a file.
+_ITEM_TYPES = {"int": int, "float": float, "bool": bool, "str": str, "int | str": Union[int, str]}
+
+
+@functools.cache
+def param_lists_model(keys="cli"):
+    """The model of one product of parameter lists: every SSLPVParams field as an optional,
+    non-empty list, keyed by its command-line name (``keys="cli"``) or its field name (``"field"``)."""
+    from sslpv_gl.params import SSLPVParams
+
+    fields = {}
+    for f in dataclasses.fields(SSLPVParams):
+        item = _ITEM_TYPES.get(str(f.type), Union[int, float, str, bool])
+        key = FIELD_TO_CLI.get(f.name, f.name) if keys == "cli" else f.name
+        fields[key] = (Optional[Annotated[list[item], Field(min_length=1)]],
+                       Field(None, description=SSLPVParams.doc(f.name), examples=[[f.default]]))
+    return create_model(f"ParamLists_{keys}", __base__=InputModel, **fields)
+
+
+def product_dict(model):
+    """A validated product model -> ``{SSLPVParams field: [values]}`` (only the given ones)."""
+    out = {}
+    for key, values in model.model_dump(exclude_none=True).items():
+        out[CLI_TO_FIELD.get(key, key)] = values
+    return out
+
+
+def check_products(products, where, prefix="params", keys="cli"):
+    """Let SSLPVParams judge every combination of each product; a bad value names ``where`` and
+    ``<prefix>.<key>`` (or ``<prefix>[i].<key>`` for a list of products) instead of the flag.
+
+    Errors that name their own file (a calibrated mapping's) are raised as they are.
+    """
+    many = isinstance(products, list)
+    for i, lists in enumerate(products if many else [products]):
+        try:
+            expand(lists)
+        except InputError as exc:
+            if not exc.where.startswith("--"):
+                raise
+            key = FIELD_TO_CLI.get(exc.field, exc.field) if keys == "cli" else exc.field
+            at = f"{prefix}[{i}]" if many else prefix
+            raise InputError(where, f"{at}.{key}", exc.problem, exc.fix) from None
 
 
 def _convert(cli_name, text, type_name):

@@ -65,13 +65,18 @@ import json
 import os
 import time
 from pathlib import Path
+from typing import Annotated, Optional, Union
 
 import numpy as np
 from dask.distributed import WorkerPlugin
+from pydantic import Field
+from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from harness.io.atomic import atomic_write
 from harness.errors import InputError
-from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, expand, parse_lists
+from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, expand, param_lists_model, \
+    parse_lists, product_dict
+from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, ImageSize, read_json, validate
 
 from harness.scene import list_scenes, load_scene, scene_path
 
@@ -94,32 +99,41 @@ SWEEP_FILE = "sweep.json"
 DEFAULT_LP_THREADS = "default"
 
 
-@dataclasses.dataclass
-class SweepConfig:
-    """The resolved configuration of a sweep; written beside its results as ``sweep.json``."""
+_PRODUCT = param_lists_model("field")
 
-    scenes: list                      # scene names or folders
-    params: dict                      # SSLPVParams field -> list of values (or a list of such products)
-    out: str                          # output folder
-    store: str = ""                   # results store (default OUT/store.sqlite)
-    size: list = None                 # [W, H] or None for the scenes' own size
-    kind: str = "sweep"               # run kind in the store
-    reference_target: float = None    # median relative SE asked of references (None: renderer default)
+
+@pydantic_dataclass(config=INPUT_CONFIG)
+class SweepConfig:
+    """The resolved configuration of a sweep; written beside its results as ``sweep.json``.
+
+    A typed input (a pydantic dataclass): a ``sweep.json`` given to ``--config`` is checked
+    field by field (unknown keys, wrong types, sizes beyond 8192 are refused with one line).
+    """
+
+    scenes: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]  # names or folders
+    params: Union[_PRODUCT, list[_PRODUCT]]  # SSLPVParams field -> list of values (or a list of such products)
+    out: str                                 # output folder
+    store: str = ""                          # results store (default OUT/store.sqlite)
+    size: Optional[Annotated[list[ImageSize], Field(min_length=2, max_length=2)]] = None  # [W, H]; None: scene's
+    kind: str = "sweep"                      # run kind in the store
+    reference_target: Optional[Annotated[float, Field(gt=0, lt=1)]] = None  # median rel. SE asked of references
+
+    def __post_init__(self):
+        # Plain dicts again: sweep.json and the store's run config stay what they always were.
+        self.params = ([product_dict(p) for p in self.params] if isinstance(self.params, list)
+                       else product_dict(self.params))
 
     def to_json(self):
         return json.dumps(dataclasses.asdict(self), indent=2)
 
     @classmethod
     def from_file(cls, path):
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(path, "file", "does not exist", "give the sweep.json a sweep wrote")
-        try:
-            data = json.loads(path.read_text())
-            return cls(**data)
-        except (json.JSONDecodeError, TypeError) as exc:
-            raise InputError(path, "sweep.json", f"is not a sweep configuration ({exc})",
-                             "give the sweep.json a sweep wrote") from exc
+        """A ``sweep.json``, validated: types by the dataclass, values by SSLPVParams, scenes by the suite."""
+        data = read_json(path, "a sweep.json", "give the sweep.json a sweep wrote")
+        cfg = validate(cls, data, path, syntax="json")
+        check_products(cfg.params, path, "params", keys="field")
+        resolve_scenes(cfg.scenes, where=path)
+        return cfg
 
 
 def parse_size(text):
@@ -131,18 +145,26 @@ def parse_size(text):
             raise ValueError
     except ValueError:
         raise InputError("--size", "size", f"{text!r} is not WIDTHxHEIGHT", "write e.g. 128x128") from None
+    if w > MAX_IMAGE_SIZE or h > MAX_IMAGE_SIZE:
+        raise InputError("--size", "size", f"{w}x{h} is larger than {MAX_IMAGE_SIZE}x{MAX_IMAGE_SIZE}",
+                         f"give a width and height of at most {MAX_IMAGE_SIZE}, e.g. 128x128")
     return [w, h]
 
 
-def resolve_scenes(spec):
-    """Comma-separated names (or a list) -> validated list; unknown or empty gives one line."""
-    names = [s.strip() for s in spec.split(",")] if isinstance(spec, str) else list(spec or list_scenes())
+def resolve_scenes(spec, where="--scenes", field="scenes"):
+    """Comma-separated names (or a list) -> validated list; unknown or empty gives one line.
+
+    ``where``/``field`` name the source in the message: the flag, or a file and its key.
+    """
+    listed = not isinstance(spec, str)
+    names = list(spec or list_scenes()) if listed else [s.strip() for s in spec.split(",")]
     if not names or any(not n for n in names):
-        raise InputError("--scenes", "scenes", f"empty scene name in {spec!r}", "list scene names separated by commas")
+        raise InputError(where, field, f"empty scene name in {spec!r}", "list scene names separated by commas")
     known = list_scenes()
-    for n in names:
+    for i, n in enumerate(names):
         if not scene_path(n).is_file():
-            raise InputError("--scenes", "scenes", f"unknown scene {n!r}", f"choose from: {', '.join(known)}")
+            raise InputError(where, f"{field}[{i}]" if listed and where != "--scenes" else field,
+                             f"unknown scene {n!r}", f"choose from: {', '.join(known)}")
     return names
 
 

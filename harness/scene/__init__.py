@@ -1,19 +1,20 @@
 """The scene stage: a ``scene.toml`` read once into a validated, immutable :class:`Scene`.
 
-=====================  ======================================================
+=====================  ======================================================================
 module                 job
-=====================  ======================================================
-:mod:`.load`           the file format, validation, :class:`Scene` and its hash
-:mod:`.geometry`       meshes: built-in shapes and files, closedness, inside tests
-:mod:`.fields`         procedural and file-backed medium grids (sigma_t, albedo, g)
-=====================  ======================================================
+=====================  ======================================================================
+:mod:`.model`          the ``scene.toml`` format as typed models, its derived checks, its JSON Schema
+:mod:`.load`           reading a scene into the immutable :class:`Scene`, and its hash
+:mod:`.geometry`       meshes: the ``[mesh]`` models, shapes and files, repair, closedness, inside tests
+:mod:`.fields`         the medium field models and their grids (sigma_t, albedo, g)
+=====================  ======================================================================
 
 Both renderers (Mitsuba in :mod:`harness.reference`, SSLPV in :mod:`sslpv_gl`) are
 built from the one :class:`Scene`; this package imports neither of them.
 """
 
+from harness.scene.model import BOUNDARY_KINDS, SceneFile, json_schema
 from harness.scene.load import (
-    BOUNDARY_KINDS,
     SUITE_DIR,
     Boundary,
     Camera,
@@ -28,5 +29,5 @@ from harness.scene.load import (
 
 __all__ = [
     "BOUNDARY_KINDS", "SUITE_DIR", "Boundary", "Camera", "Medium", "PointLight", "Scene",
-    "list_scenes", "load_scene", "scene_hash", "scene_path",
+    "list_scenes", "load_scene", "scene_hash", "scene_path", "SceneFile", "json_schema",
 ]

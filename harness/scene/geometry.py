@@ -1,8 +1,8 @@
-"""Closed triangle meshes: procedural shapes (pymeshlab), files, and the two
-geometric queries the harness needs: is the mesh closed, and which points lie
-inside it.
+"""Closed triangle meshes: the ``[mesh]`` table's typed models, procedural shapes
+(pymeshlab), files, the optional repair of files with holes, and the two geometric
+queries the harness needs: is the mesh closed, and which points lie inside it.
 
-Mesh kinds accepted in ``scene.toml``'s ``[mesh]`` table:
+Mesh kinds accepted in ``scene.toml``'s ``[mesh]`` table (one model each, below):
 
 ============  =====================================================================
 kind          parameters (defaults)
@@ -11,8 +11,17 @@ kind          parameters (defaults)
 ``torus``     ``major_radius`` (0.8), ``minor_radius`` (0.25), ``center``,
               ``rotate_x_deg`` (0), ``segments`` ([96, 32]); axis is z before rotation
 ``box``       ``size`` ([1,1,1]), ``center``; faces carry flat normals
-``file``      ``path`` (PLY/OBJ inside the scene folder), ``scale`` (1.0), ``translate``
+``file``      ``path`` (PLY/OBJ inside the scene folder), ``scale`` (1.0), ``translate``,
+              ``repair`` (none; ``"close-holes"`` closes holes with pymeshlab)
 ============  =====================================================================
+
+Every mesh must be closed and two-manifold, or inside and outside are undefined.
+``repair = "close-holes"`` (opt-in, files only) welds coincident vertices, removes
+unreferenced ones and closes holes of up to :data:`MAX_HOLE_EDGES` edges with
+pymeshlab (``meshing_close_holes``, self-intersection test off, repeated while it
+helps: one pass leaves a last small hole on the Stanford bunny, ``../shared/NOTES.md``).
+A mesh that is still open afterwards is refused. What the repair changed is kept in
+:attr:`Mesh.repair` and written into each reference's ``reference.json``.
 
 Inside/outside uses ray parity along +x; two independent voxelisations
 (pymeshlab signed distance and Mitsuba ray parity) agreed on every cell of a
@@ -21,15 +30,21 @@ torus (``../shared/NOTES.md``).
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal, Optional, Union
 
 import numpy as np
 # Imported here, not lazily inside a function: the first import loads MeshLab's Qt plugins,
 # and they must be loaded on a process's main thread (see harness.runs.sweep.ReleaseGL).
 import pymeshlab
+from pydantic import Field, PrivateAttr, ValidationInfo, model_validator
 
-from harness.errors import InputError
+from harness.validation import FieldProblem, InputModel, Positive, Vec3
 
 MESH_KINDS = ("sphere", "torus", "box", "file")
+REPAIRS = ("close-holes",)
+#: ``repair = "close-holes"`` closes holes of at most this many boundary edges.
+MAX_HOLE_EDGES = 1000
+_PASSES = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +52,7 @@ class Mesh:
     vertices: np.ndarray  # (V, 3) float64, scene units
     faces: np.ndarray     # (F, 3) int32, counter-clockwise seen from outside
     normals: np.ndarray   # (V, 3) float64, outward, unit length
+    repair: dict = None   # what ``repair = "close-holes"`` changed (None: the mesh as given)
 
     @property
     def bbox(self):
@@ -46,34 +62,84 @@ class Mesh:
         return self.vertices[self.faces]
 
 
-def _vec3(spec, key, default, where):
-    value = spec.get(key, default)
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise InputError(where, f"mesh.{key}", f"must be three finite numbers, got {value!r}", "write e.g. [0, 0, 0]")
-    return arr
+# --------------------------------------------------------------------------- the [mesh] table
+
+_CENTER = Field(default=[0.0, 0.0, 0.0], description="centre, scene units", examples=[[0.0, 0.0, 0.0]])
 
 
-def _positive(spec, key, default, where):
-    value = spec.get(key, default)
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value) or value <= 0:
-        raise InputError(where, f"mesh.{key}", f"must be a positive number, got {value!r}", "use a value > 0")
-    return float(value)
+class _MeshSpec(InputModel):
+    """Builds the mesh once the table is valid (only when the scene folder is in the context)."""
+
+    _mesh: Mesh = PrivateAttr(default=None)
+
+    def _check(self):
+        """Rules between this table's own fields (a type checks each field alone)."""
+
+    @model_validator(mode="after")
+    def _build(self, info: ValidationInfo):
+        self._check()
+        scene_dir = (info.context or {}).get("scene_dir")
+        if scene_dir is not None:
+            self._mesh = build_mesh(self, scene_dir)
+        return self
+
+    @property
+    def mesh(self):
+        return self._mesh
 
 
-def _integer(spec, key, default, lo, hi, where):
-    value = spec.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise InputError(where, f"mesh.{key}", f"must be an integer in [{lo}, {hi}], got {value!r}", "change the value")
-    return value
+class SphereMesh(_MeshSpec):
+    """An icosphere (pymeshlab ``create_sphere``)."""
+
+    kind: Literal["sphere"]
+    radius: Positive = Field(1.0, description="radius, scene units", examples=[1.0])
+    center: Vec3 = _CENTER
+    subdivisions: Annotated[int, Field(ge=1, le=6)] = Field(4, description="icosphere subdivisions", examples=[4])
 
 
-def _number(spec, key, default, where):
-    value = spec.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(where, f"mesh.{key}", f"must be a finite number, got {value!r}", "change the value")
-    return float(value)
+class TorusMesh(_MeshSpec):
+    """A torus around z, then rotated about x (pymeshlab ``create_torus``)."""
 
+    kind: Literal["torus"]
+    major_radius: Positive = Field(0.8, description="ring radius, scene units", examples=[0.8])
+    minor_radius: Positive = Field(0.25, description="tube radius, scene units; < major_radius", examples=[0.25])
+    center: Vec3 = _CENTER
+    rotate_x_deg: float = Field(0.0, description="rotation about x, degrees", examples=[-60.0])
+    segments: Annotated[list[Annotated[int, Field(ge=3, le=1024)]], Field(min_length=2, max_length=2)] = Field(
+        [96, 32], description="subdivisions along the ring and around the tube", examples=[[96, 32]])
+
+    def _check(self):
+        if self.minor_radius >= self.major_radius:
+            raise FieldProblem("minor_radius", f"{self.minor_radius:g} must be smaller than major_radius "
+                               f"{self.major_radius:g}", "lower minor_radius")
+
+
+class BoxMesh(_MeshSpec):
+    """An axis-aligned box with flat faces."""
+
+    kind: Literal["box"]
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Field(
+        [1.0, 1.0, 1.0], description="edge lengths x, y, z, scene units", examples=[[1.8, 1.8, 0.3]])
+    center: Vec3 = _CENTER
+
+
+class FileMesh(_MeshSpec):
+    """A PLY or OBJ file inside the scene folder."""
+
+    kind: Literal["file"]
+    path: Annotated[str, Field(min_length=1)] = Field(description="PLY or OBJ file, relative to the scene folder",
+                                                      examples=["bunny.ply"])
+    scale: Positive = Field(1.0, description="uniform scale applied to the file's coordinates", examples=[1.0])
+    translate: Vec3 = Field([0.0, 0.0, 0.0], description="offset added after scaling", examples=[[0.0, 0.0, 0.0]])
+    repair: Optional[Literal["close-holes"]] = Field(
+        None, description="close the file's holes with pymeshlab (opt-in); a mesh still open after it is refused",
+        examples=["close-holes"])
+
+
+MeshSpec = Annotated[Union[SphereMesh, TorusMesh, BoxMesh, FileMesh], Field(discriminator="kind")]
+
+
+# --------------------------------------------------------------------------- building
 
 def _from_meshset(ms):
     m = ms.current_mesh()
@@ -116,65 +182,102 @@ def _box(size, center):
     return np.array(verts), np.array(faces, dtype=np.int32), np.array(normals)
 
 
-def build_mesh(spec, where, scene_dir):
-    """Build the mesh described by the ``[mesh]`` table; refuse open meshes."""
-    kind = spec.get("kind")
-    if kind not in MESH_KINDS:
-        raise InputError(where, "mesh.kind", f"unknown kind {kind!r}", f"use one of: {', '.join(MESH_KINDS)}")
-    center = _vec3(spec, "center", [0, 0, 0], where)
+def build_mesh(spec, scene_dir):
+    """The closed, outward-facing :class:`Mesh` of a validated ``[mesh]`` model.
+
+    Raises :class:`~harness.validation.FieldProblem` (paths relative to ``[mesh]``) for
+    a file that cannot be used and for a mesh that is not closed.
+    """
+    center = np.asarray(getattr(spec, "center", [0.0, 0.0, 0.0]), dtype=np.float64)
     ms = pymeshlab.MeshSet()
-    normals = None
-    if kind == "sphere":
-        subdiv = _integer(spec, "subdivisions", 4, 1, 6, where)
-        ms.create_sphere(radius=_positive(spec, "radius", 1.0, where), subdiv=subdiv)
+    normals, repair = None, None
+    if spec.kind == "sphere":
+        ms.create_sphere(radius=float(spec.radius), subdiv=int(spec.subdivisions))
         v, f = _from_meshset(ms)
         v = v + center
-    elif kind == "torus":
-        major, minor = _positive(spec, "major_radius", 0.8, where), _positive(spec, "minor_radius", 0.25, where)
-        if minor >= major:
-            raise InputError(where, "mesh.minor_radius", f"{minor} must be smaller than major_radius {major}",
-                             "lower minor_radius")
-        segments = spec.get("segments", [96, 32])
-        if (not isinstance(segments, list) or len(segments) != 2
-                or not all(isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= 1024 for n in segments)):
-            raise InputError(where, "mesh.segments", f"must be two integers in [3, 1024], got {segments!r}",
-                             "write e.g. [96, 32]")
-        ms.create_torus(hradius=major, vradius=minor, hsubdiv=segments[0], vsubdiv=segments[1])
+    elif spec.kind == "torus":
+        ms.create_torus(hradius=float(spec.major_radius), vradius=float(spec.minor_radius),
+                        hsubdiv=spec.segments[0], vsubdiv=spec.segments[1])
         v, f = _from_meshset(ms)
-        angle = np.radians(_number(spec, "rotate_x_deg", 0.0, where))
+        angle = np.radians(float(spec.rotate_x_deg))
         c, s = np.cos(angle), np.sin(angle)
         v = v @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]) + center
-    elif kind == "box":
-        v, f, normals = _box(_vec3(spec, "size", [1, 1, 1], where), center)
+    elif spec.kind == "box":
+        v, f, normals = _box(np.asarray(spec.size, dtype=np.float64), center)
     else:
-        path = resolve_inside(scene_dir, spec.get("path"), where, "mesh.path")
+        path = resolve_inside(scene_dir, spec.path, "path")
         try:
             ms.load_new_mesh(str(path))
-        except Exception as exc:
-            raise InputError(where, "mesh.path", f"cannot read {path.name} ({exc})", "give a PLY or OBJ file") from exc
+        except Exception as exc:  # pymeshlab raises its own PyMeshLabException
+            raise FieldProblem("path", f"cannot read {path.name} ({str(exc).strip() or type(exc).__name__})",
+                               "give a PLY or OBJ file") from exc
         v, f = _from_meshset(ms)
-        v = v * _positive(spec, "scale", 1.0, where) + _vec3(spec, "translate", [0, 0, 0], where)
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            raise FieldProblem("path", f"{path.name} has {int(bad.sum())} vertices with NaN or infinite "
+                               f"coordinates (the first is vertex {int(np.flatnonzero(bad)[0])})",
+                               "fix or remove those vertices in the file")
+        if spec.repair == "close-holes" and len(f):
+            v, f, repair = close_holes(v, f)
+        v = v * float(spec.scale) + np.asarray(spec.translate, dtype=np.float64)
     if len(f) == 0:
-        raise InputError(where, "mesh", "has no faces", "give a closed triangle mesh")
-    check_closed(v, f, where)
+        raise FieldProblem((), "has no faces", "give a closed triangle mesh")
+    check_closed(v, f, repaired=repair is not None, file=spec.kind == "file")
     if normals is None:
         normals = _vertex_normals(v, f)
-    mesh = Mesh(v, f, normals)
+    mesh = Mesh(v, f, normals, repair)
     if signed_volume(mesh) < 0:
-        mesh = Mesh(v, f[:, ::-1].copy(), -normals)
+        mesh = Mesh(v, f[:, ::-1].copy(), -normals, repair)
     return mesh
 
 
-def check_closed(vertices, faces, where):
-    """Raise unless the mesh (after welding coincident vertices) is closed and two-manifold."""
+def _topology(vertices, faces, weld=True):
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices, face_matrix=faces))
-    ms.meshing_merge_close_vertices(threshold=pymeshlab.PercentageValue(1e-4))
-    topo = ms.get_topological_measures()
+    if weld:
+        ms.meshing_merge_close_vertices(threshold=pymeshlab.PercentageValue(1e-4))
+    return ms, ms.get_topological_measures()
+
+
+def check_closed(vertices, faces, repaired=False, file=False):
+    """Raise :class:`FieldProblem` unless the mesh (coincident vertices welded) is closed and two-manifold."""
+    _, topo = _topology(vertices, faces)
     if topo["boundary_edges"] > 0 or not topo["is_mesh_two_manifold"]:
-        raise InputError(where, "mesh", f"is not closed ({topo['boundary_edges']} boundary edges, "
-                         f"two-manifold={topo['is_mesh_two_manifold']})",
-                         "close the holes, e.g. with MeshLab's 'Close Holes', so inside and outside are defined")
+        state = (f"{topo['boundary_edges']} boundary edges, two-manifold={topo['is_mesh_two_manifold']}")
+        if repaired:
+            raise FieldProblem((), f"is still not closed after repair = \"close-holes\" ({state}; holes of more "
+                               f"than {MAX_HOLE_EDGES} edges and non-manifold parts are not repaired)",
+                               "repair the mesh in MeshLab or Blender, so inside and outside are defined")
+        fix = ("add repair = \"close-holes\" to [mesh], or close the holes in MeshLab" if file else
+               "close the holes, e.g. with MeshLab's 'Close Holes'")
+        raise FieldProblem((), f"is not closed ({state})", f"{fix}, so inside and outside are defined")
+
+
+def close_holes(vertices, faces):
+    """``repair = "close-holes"``: weld, drop unreferenced vertices, close holes; returns (v, f, what changed)."""
+    ms, before = _topology(vertices, faces)
+    welded = len(vertices) - ms.current_mesh().vertex_number()
+    n0 = ms.current_mesh().vertex_number()
+    ms.meshing_remove_unreferenced_vertices()
+    unreferenced = n0 - ms.current_mesh().vertex_number()
+    f0 = ms.current_mesh().face_number()
+    passes, edges = 0, before["boundary_edges"]
+    while edges > 0 and passes < _PASSES:
+        ms.meshing_close_holes(maxholesize=MAX_HOLE_EDGES, selfintersection=False)
+        passes += 1
+        now = ms.get_topological_measures()["boundary_edges"]
+        if now >= edges:                            # no progress: what is left is not a closable hole
+            edges = now
+            break
+        edges = now
+    v, f = _from_meshset(ms)
+    after = ms.get_topological_measures()
+    return v, f, {"method": "close-holes", "tool": f"pymeshlab {pymeshlab.__version__} meshing_close_holes("
+                  f"maxholesize={MAX_HOLE_EDGES}, selfintersection=False)", "passes": passes,
+                  "boundary_edges_before": int(before["boundary_edges"]),
+                  "holes_before": int(before["number_holes"]), "boundary_edges_after": int(after["boundary_edges"]),
+                  "faces_added": int(len(f) - f0), "vertices_welded": int(welded),
+                  "unreferenced_vertices_removed": int(unreferenced)}
 
 
 def signed_volume(mesh):
@@ -182,18 +285,17 @@ def signed_volume(mesh):
     return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0)
 
 
-def resolve_inside(scene_dir, rel, where, field):
-    """Resolve a file named in a scene; refuse missing files and paths that leave the folder."""
-    if not isinstance(rel, str) or not rel:
-        raise InputError(where, field, "must name a file", "give a path relative to the scene folder")
+def resolve_inside(scene_dir, rel, field):
+    """Resolve a file named in a scene; refuse folders, missing files and paths that leave the folder."""
     scene_dir = Path(scene_dir).resolve()
     path = (scene_dir / rel).resolve()
     if not path.is_relative_to(scene_dir):
-        raise InputError(where, field, f"path {rel!r} leaves the scene folder", "put the file inside the scene folder")
+        raise FieldProblem(field, f"path {rel!r} leaves the scene folder", "put the file inside the scene folder")
+    if path.is_dir():
+        raise FieldProblem(field, f"{rel!r} is a folder, not a file", "name the file inside it")
     if not path.is_file():
-        raise InputError(where, field, f"file {rel!r} does not exist", "check the name or add the file")
+        raise FieldProblem(field, f"file {rel!r} does not exist", "check the name or add the file")
     return path
-
 
 # A direction off every axis and diagonal, so parity rays do not graze edges of
 # axis-aligned boxes or pass exactly through tessellation vertices.

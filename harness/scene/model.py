@@ -1,0 +1,200 @@
+"""The ``scene.toml`` format as typed models (pydantic v2): one model per table.
+
+``SceneFile.model_validate(data, context={"scene_dir": folder})`` checks every field's
+type and range (unknown keys, strings for numbers, NaN and infinities are refused by
+:class:`harness.validation.InputModel`), builds the mesh (``[mesh]``,
+:mod:`harness.scene.geometry`) and the medium grids (``[medium]``,
+:mod:`harness.scene.fields`), and then checks what no single field's type can say:
+
+* the mesh is closed (``[mesh]``'s validator);
+* the medium box is a cube larger than zero, and every grid value is in range
+  (``[medium]``'s validator, on the evaluated grids);
+* the camera's up vector is not parallel to its viewing direction (``[camera]``);
+* the box encloses the mesh, and the camera and every light lie outside it (the scene's).
+
+Without ``scene_dir`` in the context only the types are checked (no mesh, no grids).
+:func:`json_schema` is the JSON Schema of the format, for editors
+(``reference_scenes/scene.schema.json``, ``reference_scenes/README.md``).
+"""
+
+from typing import Annotated, Literal, Optional, Union
+
+import numpy as np
+from pydantic import Field, PrivateAttr, ValidationInfo, model_validator
+
+from harness.scene.fields import FieldSpec, evaluate_field
+from harness.scene.geometry import MeshSpec, points_inside
+from harness.validation import FieldProblem, ImageSize, InputModel, NonNegative, Vec3
+
+__all__ = ["SceneFile", "CameraSpec", "LightSpec", "IndexMatchedBoundary", "DielectricBoundary", "BoundarySpec",
+           "MediumSpec", "Tolerances", "json_schema", "BOUNDARY_KINDS"]
+
+BOUNDARY_KINDS = ("index-matched", "dielectric")
+#: Each grid's allowed range: (low, high, low open, high open).
+GRID_RANGES = {"sigma_t": (0.0, np.inf, False, False), "albedo": (0.0, 1.0, False, False),
+               "g": (-1.0, 1.0, True, True)}
+_GRID_MEANING = {"sigma_t": "extinction, per scene unit, >= 0", "albedo": "single-scattering albedo in [0, 1]",
+                 "g": "Henyey-Greenstein g in (-1, 1)"}
+
+
+def _fmt(v):
+    return ", ".join(f"{float(x):g}" for x in v)
+
+
+class CameraSpec(InputModel):
+    """``[camera]``: a pinhole (``docs/conventions.md``, camera convention)."""
+
+    origin: Vec3 = Field(description="eye position", examples=[[0.0, 0.3, 4.2]])
+    target: Vec3 = Field(description="point looked at", examples=[[0.0, 0.0, 0.0]])
+    up: Vec3 = Field([0.0, 1.0, 0.0], description="up direction (not parallel to target - origin)",
+                     examples=[[0.0, 1.0, 0.0]])
+    fov_y: Annotated[float, Field(gt=0, lt=180)] = Field(description="full vertical field of view, degrees",
+                                                         examples=[34.0])
+    width: ImageSize = Field(description="image width, pixels", examples=[128])
+    height: ImageSize = Field(description="image height, pixels", examples=[128])
+
+    @model_validator(mode="after")
+    def _looks_somewhere(self):
+        fwd = np.subtract(self.target, self.origin)
+        if np.linalg.norm(fwd) == 0:
+            raise FieldProblem("target", f"{_fmt(self.target)} equals origin", "look at a point away from the camera")
+        if np.linalg.norm(np.cross(fwd, self.up)) < 1e-9 * np.linalg.norm(fwd) * max(np.linalg.norm(self.up), 1e-300):
+            raise FieldProblem("up", f"{_fmt(self.up)} is parallel to the viewing direction (or zero)",
+                               "choose an up vector not parallel to target - origin")
+        return self
+
+
+class LightSpec(InputModel):
+    """One ``[[lights]]`` entry: a point light."""
+
+    position: Vec3 = Field(description="position, outside the object", examples=[[2.5, 1.8, 2.2]])
+    intensity: Annotated[list[NonNegative], Field(min_length=3, max_length=3)] = Field(
+        description="RGB radiant intensity, W/sr", examples=[[12.0, 12.0, 12.0]])
+
+
+class IndexMatchedBoundary(InputModel):
+    """The medium's index equals the outside's: no refraction, no reflection (eta 1)."""
+
+    kind: Literal["index-matched"]
+
+
+class DielectricBoundary(InputModel):
+    """A dielectric interface of index ``eta`` (the reference uses a rough GGX interface)."""
+
+    kind: Literal["dielectric"]
+    eta: Annotated[float, Field(gt=1.0, le=3.0)] = Field(description="relative index of refraction",
+                                                         examples=[1.4])
+    roughness: Annotated[float, Field(gt=0.0, le=1.0)] = Field(0.1, description="GGX alpha of the interface",
+                                                               examples=[0.2])
+
+
+#: ``[boundary]``; a new kind is one more model in this union (and in :data:`BOUNDARY_KINDS`).
+BoundarySpec = Annotated[Union[IndexMatchedBoundary, DielectricBoundary], Field(discriminator="kind")]
+
+
+class MediumSpec(InputModel):
+    """``[medium]``: a world-aligned cubic box with three material grids over it."""
+
+    bbox_min: Vec3 = Field(description="low corner of the grid box", examples=[[-1.05, -1.05, -1.05]])
+    bbox_max: Vec3 = Field(description="high corner (a cube that encloses the mesh)", examples=[[1.05, 1.05, 1.05]])
+    resolution: Annotated[list[Annotated[int, Field(ge=1, le=512)]], Field(min_length=3, max_length=3)] = Field(
+        description="nx, ny, nz of the material grids", examples=[[64, 64, 64]])
+    sigma_t: FieldSpec = Field(description=_GRID_MEANING["sigma_t"],
+                               examples=[{"kind": "constant", "value": [8.0, 8.0, 8.0]}])
+    albedo: FieldSpec = Field(description=_GRID_MEANING["albedo"],
+                              examples=[{"kind": "constant", "value": [0.99, 0.99, 0.99]}])
+    g: FieldSpec = Field(description=_GRID_MEANING["g"], examples=[{"kind": "constant", "value": [0.0, 0.0, 0.0]}])
+
+    _grids: dict = PrivateAttr(default=None)
+
+    @model_validator(mode="after")
+    def _box_and_grids(self, info: ValidationInfo):
+        bmin, bmax = np.asarray(self.bbox_min, np.float64), np.asarray(self.bbox_max, np.float64)
+        if np.any(bmax <= bmin):
+            raise FieldProblem("bbox_max", f"[{_fmt(bmax)}] must be larger than bbox_min [{_fmt(bmin)}] on every "
+                               "axis", "swap or widen them")
+        extent = bmax - bmin
+        if np.ptp(extent) > 1e-9 * extent.max():
+            raise FieldProblem("bbox_max", f"box extent {_fmt(extent)} is not a cube; SSLPV's LPV cells are cubes "
+                               "over this box", "give the box the same size on every axis")
+        scene_dir = (info.context or {}).get("scene_dir")
+        if scene_dir is None:
+            return self
+        grids = {}
+        for name in GRID_RANGES:
+            grids[name] = evaluate_field(getattr(self, name), tuple(self.resolution), bmin, bmax, name, scene_dir)
+            _check_grid(name, grids[name])
+        self._grids = grids
+        return self
+
+    @property
+    def grids(self):
+        return self._grids
+
+
+def _check_grid(name, arr):
+    lo, hi, lo_open, hi_open = GRID_RANGES[name]
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        raise FieldProblem(name, f"contains {int(bad.sum())} NaN or Inf values", "fix the grid")
+    below = arr <= lo if lo_open else arr < lo
+    above = arr >= hi if hi_open else arr > hi
+    if below.any() or above.any():
+        lb, rb = ("(" if lo_open else "["), (")" if hi_open else "]")
+        worst = float(arr[below | above].flat[0])
+        raise FieldProblem(name, f"has {int((below | above).sum())} values outside {lb}{lo}, {hi}{rb} "
+                           f"(e.g. {worst:g})", f"keep {name} within {lb}{lo}, {hi}{rb}")
+
+
+class Tolerances(InputModel):
+    """``[tolerances]``: what the references of this scene must reach."""
+
+    reference_rel_se: Optional[Annotated[float, Field(gt=0, lt=1)]] = Field(
+        None, description="median relative standard error asked of the reference at the scene size",
+        examples=[0.05])
+    small_reference_rel_se: Optional[Annotated[float, Field(gt=0, lt=1)]] = Field(
+        None, description="... and of the committed 64x64 reference in baselines/refs", examples=[0.03])
+
+
+class SceneFile(InputModel):
+    """A ``scene.toml``: the whole scene, declared once (``reference_scenes/README.md``)."""
+
+    units: Annotated[str, Field(min_length=1)] = Field(description="scene unit; every coefficient is per unit",
+                                                       examples=["cm"])
+    description: str = Field("", description="one line", examples=["a homogeneous sphere"])
+    tags: list[str] = Field([], description="free-form labels", examples=[["homogeneous"]])
+    mesh: MeshSpec = Field(description="the object: a closed mesh", examples=[{"kind": "sphere", "radius": 1.0}])
+    camera: CameraSpec
+    lights: Annotated[list[LightSpec], Field(min_length=1)] = Field(
+        description="one or more [[lights]] entries",
+        examples=[[{"position": [2.5, 1.8, 2.2], "intensity": [12.0, 12.0, 12.0]}]])
+    boundary: BoundarySpec = Field(description="the object's surface", examples=[{"kind": "index-matched"}])
+    medium: MediumSpec
+    tolerances: Tolerances = Field(default_factory=Tolerances)
+
+    @model_validator(mode="after")
+    def _placement(self):
+        mesh, medium = self.mesh.mesh, self.medium
+        if mesh is None or medium.grids is None:   # types only (no scene folder in the context)
+            return self
+        bmin, bmax = np.asarray(medium.bbox_min, float), np.asarray(medium.bbox_max, float)
+        mlo, mhi = mesh.bbox
+        if np.any(mlo < bmin) or np.any(mhi > bmax):
+            raise FieldProblem("medium.bbox_min/bbox_max", f"box [{_fmt(bmin)}]..[{_fmt(bmax)}] does not enclose the "
+                               f"mesh [{_fmt(mlo)}]..[{_fmt(mhi)}]", "grow the box to enclose the mesh")
+        probes = [(("camera", "origin"), self.camera.origin)] + [
+            (("lights", i, "position"), lt.position) for i, lt in enumerate(self.lights)]
+        inside = points_inside(mesh, np.array([p for _, p in probes], dtype=np.float64))
+        for (path, p), flag in zip(probes, inside):
+            if flag:
+                raise FieldProblem(path, f"{_fmt(p)} lies inside the mesh", "move it outside the object")
+        return self
+
+
+def json_schema():
+    """The JSON Schema of ``scene.toml`` (draft 2020-12), with descriptions and examples for editors."""
+    schema = SceneFile.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["$id"] = "https://sslpv-harness/reference_scenes/scene.schema.json"
+    schema["title"] = "SSLPV harness scene.toml"
+    return schema
