@@ -16,6 +16,6 @@ def run(args):
     from harness.cli.report import resolve_store
     from harness.store import Store
 
-    with Store(resolve_store(args.source)) as st:
+    with Store(resolve_store(args.source), readonly=True) as st:
         rows = st.export(args.out, run_id=args.run, scene=args.scene)
     return {"store": str(args.source), "out": str(args.out), "rows": rows}, None, 0

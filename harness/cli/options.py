@@ -1,6 +1,7 @@
 """Argument helpers that several commands share."""
 
 import argparse
+import math
 
 
 def positive_int(value):
@@ -8,9 +9,20 @@ def positive_int(value):
     try:
         out = int(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{value!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"must be an integer > 0, got {value!r}") from None
     if out <= 0:
-        raise argparse.ArgumentTypeError(f"{value!r} must be > 0")
+        raise argparse.ArgumentTypeError(f"must be an integer > 0, got {value!r}")
+    return out
+
+
+def positive_number(value):
+    """argparse type: a finite number > 0 (``nan``, ``inf`` and ``-1`` are refused)."""
+    try:
+        out = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {value!r}") from None
+    if not math.isfinite(out) or out <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value!r}")
     return out
 
 

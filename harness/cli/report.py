@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+from harness.cli.options import positive_number
 from harness.errors import InputError
 
 
@@ -28,7 +29,8 @@ def configure(sp):
     sp.add_argument("source", type=Path, help="store.sqlite or a sweep folder")
     sp.add_argument("--out", type=Path, required=True, help="output folder for the site")
     sp.add_argument("--run", type=int, help="run id (default: the latest)")
-    sp.add_argument("--budget-ms", type=float, help="SSLPV cost budget for the summary (default: median cost)")
+    sp.add_argument("--budget-ms", type=positive_number,
+                    help="SSLPV cost budget for the summary, ms > 0 (default: median cost)")
 
 
 def run(args):

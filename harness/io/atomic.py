@@ -1,11 +1,19 @@
 """Write-then-rename, so that an interrupted or failed write never leaves a
-half-written result under the final name."""
+half-written result under the final name.
+
+Temporary names come from :func:`harness.io.outputs.temp_name`, and every write first
+removes the temporaries that a killed earlier run left for the same output
+(:func:`harness.io.outputs.remove_leftovers`), never anyone else's.
+"""
 
 import contextlib
 import os
 import shutil
-import tempfile
 from pathlib import Path
+
+from harness.io.outputs import MARKER, check_replaceable, remove_leftovers, temp_name
+
+__all__ = ["atomic_write", "atomic_dir", "MARKER"]
 
 
 @contextlib.contextmanager
@@ -13,32 +21,15 @@ def atomic_write(path):
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix or ".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp)
+    remove_leftovers(path)
+    tmp = Path(f"{temp_name(path)}{path.suffix or '.tmp'}")  # writers that go by the extension
+    tmp.touch()
     try:
         yield tmp
         os.replace(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
-
-
-#: Written into every folder :func:`atomic_dir` produces; only such folders (or empty
-#: ones) may be replaced, so ``--out ~/Documents`` can never wipe a user's folder.
-MARKER = ".sslpv-output"
-
-
-def _check_replaceable(path):
-    from harness.errors import InputError
-
-    if not path.exists():
-        return
-    if not path.is_dir():
-        raise InputError(path, "output", "exists and is not a folder", "choose a new folder name")
-    if any(path.iterdir()) and not (path / MARKER).exists():
-        raise InputError(path, "output", "is a non-empty folder that the harness did not write",
-                         "choose an empty or new folder")
 
 
 @contextlib.contextmanager
@@ -50,15 +41,18 @@ def atomic_dir(path):
     ``path`` is either the complete old output or the complete new one.
     """
     path = Path(path)
-    _check_replaceable(path)
+    check_replaceable(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    remove_leftovers(path)
+    tmp = temp_name(path)
+    tmp.mkdir()
     old = None
     try:
         yield tmp
         (tmp / MARKER).write_text("written by sslpv-harness; this folder is replaced as a whole\n")
         if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
+            old = temp_name(path, "old")
+            old.mkdir()
             os.replace(path, old / path.name)
         os.replace(tmp, path)
     finally:

@@ -18,6 +18,7 @@ FLIP maps come from ``harness.metrics.compute("flip", ...)``.
 """
 
 import json
+import math
 import os
 import re
 import shutil
@@ -31,6 +32,7 @@ from markupsafe import Markup, escape
 
 from harness.io import images
 from harness.io.atomic import atomic_dir
+from harness.io.outputs import check_replaceable, check_writable
 from harness.errors import InputError
 from harness.store import STAGES, Store
 from . import plots
@@ -84,7 +86,12 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
     out_dir = Path(out_dir)
     if not store_path.is_file():
         raise InputError(store_path, "file", "does not exist", "pass the results store that a sweep wrote")
-    with Store(store_path) as st:
+    if cost_budget_ms is not None and not (math.isfinite(float(cost_budget_ms)) and float(cost_budget_ms) > 0):
+        raise InputError("--budget-ms", "budget_ms", f"must be a finite number > 0, got {cost_budget_ms!r}",
+                         "give the SSLPV cost budget in ms, e.g. 250")
+    check_replaceable(out_dir)
+    check_writable(out_dir, "--out")
+    with Store(store_path, readonly=True) as st:
         runs = st.runs()
         if not runs:
             raise InputError(store_path, "runs", "the store has no runs", "run a sweep first")
@@ -92,11 +99,7 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
             with_configs = [r for r in runs if r["n_configs"] > 0]
             run = (with_configs or runs)[-1]
         else:
-            match = [r for r in runs if r["id"] == run_id]
-            if not match:
-                raise InputError(store_path, "run_id", f"run {run_id} does not exist",
-                                 f"pick one of {', '.join(str(r['id']) for r in runs)}")
-            run = match[0]
+            run = st.run(run_id)
         configs = st.configs(run["id"])
 
     rank = tuple(rank)

@@ -5,6 +5,7 @@ from pathlib import Path
 
 from harness.errors import InputError
 from harness.io.atomic import atomic_write
+from harness.io.outputs import check_writable
 from harness.store.schema import STAGES
 from harness.store.store import _dumps
 
@@ -27,8 +28,19 @@ def export(store, path, run_id=None, scene=None):
     """
     path = Path(path)
     fmt = path.suffix.lower()
+    if path.is_dir():
+        raise InputError(path, "output", "is a folder", "give --out a file name ending in .csv or .parquet")
     if fmt not in (".csv", ".parquet"):
         raise InputError(path, "format", f"unknown extension {path.suffix!r}", "export to .csv or .parquet")
+    check_writable(path, "--out")
+    if run_id is not None:
+        store.run(run_id)                        # an unknown id is refused, as `report --run` refuses it
+    if scene is not None:
+        scenes = store.scenes(run_id)
+        if scene not in scenes:
+            within = f" of run {run_id}" if run_id is not None else ""
+            raise InputError(store.path, "scene", f"no configuration{within} is of scene {scene!r}",
+                             f"pick one of: {', '.join(scenes)}" if scenes else "the store has no configurations")
     if fmt == ".parquet":
         try:
             import pyarrow as pa

@@ -39,6 +39,10 @@ have been applied; :data:`MIGRATIONS` is the ordered list. To change the
 schema, append a function to it (never edit an old one). A store written by a
 newer harness is refused untouched.
 
+Recognition: ``PRAGMA application_id`` is :data:`APPLICATION_ID` in every store this
+harness creates or migrates (stores made before that are recognised by their four
+tables). Any other SQLite file is refused, read-only, before anything is written to it.
+
 Timestamps are UTC ISO 8601 (``2025-01-31T12:00:00+00:00``).
 """
 
@@ -50,6 +54,11 @@ STAGES = ("rsm", "injection", "propagation", "shading", "total")
 CONFIG_STATUSES = ("ok", "failed")
 
 BUSY_TIMEOUT_MS = 30_000
+#: ``PRAGMA application_id`` of a results store ("SSLP"), set when a store is created or
+#: migrated: another program's SQLite file is recognised and refused before it is written.
+APPLICATION_ID = 0x53534C50
+#: The tables of the first migration: a store made before the application id was set has them.
+TABLES = ("runs", "configurations", "metrics", "timings")
 
 
 # ---------------------------------------------------------------- migrations

@@ -19,12 +19,15 @@ import contextlib
 import hashlib
 import json
 import math
+import os
 import sqlite3
 import threading
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 
 from harness.errors import InputError
+from harness.io.outputs import check_writable
 from harness.store import provenance, schema
 from harness.store.schema import BUSY_TIMEOUT_MS, CONFIG_STATUSES, IMAGES, STAGES
 
@@ -63,6 +66,19 @@ def _loads(text):
     return None if text is None else json.loads(text)
 
 
+def _retry_locked(fn, timeout_s=BUSY_TIMEOUT_MS / 1000):
+    """``fn()``, retried with backoff while SQLite answers "database is locked", up to ``timeout_s``."""
+    deadline, delay = time.monotonic() + timeout_s, 0.005
+    while True:
+        try:
+            return fn()
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) and "busy" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(delay)
+            delay = min(2 * delay, 0.25)
+
+
 def _finite(where, field, value, allow_none=False):
     """``value`` as a finite float, or an InputError naming the field."""
     if value is None and allow_none:
@@ -86,12 +102,17 @@ class Store:
     ----------
     path : str or Path
         The store file; created (with its folder) when missing.
+    readonly : bool
+        Open an up-to-date store without writing anything (``export``, ``report``); it
+        then also opens in a folder this process cannot write. An older store is migrated
+        first, which needs a writable folder.
 
     Raises
     ------
     InputError
-        When the file is not an SQLite database, or was written by a newer
-        harness (then nothing in it is changed).
+        When the file is not an SQLite database, is another program's database, was
+        written by a newer harness (in all three cases nothing in it is changed), or
+        cannot be written where it is (the message says why: a read-only folder or file).
 
     Examples
     --------
@@ -102,57 +123,119 @@ class Store:
     ...     st.finish_run(run, "ok")
     """
 
-    def __init__(self, path):
+    def __init__(self, path, readonly=False):
         self.path = Path(path)
+        self.readonly = bool(readonly)
         self._lock = threading.Lock()
         self._db = None
-        if self.path.exists():
-            self._refuse_newer()
-        else:
+        found = self._inspect()                      # read-only: a foreign or newer file is never touched
+        if self.readonly and found == schema.schema_version():
+            self._db = self._connect_readonly()
+            return
+        if found is None:
+            check_writable(self.path, "the store")
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None,
                                  check_same_thread=False)
         except sqlite3.Error as exc:
-            raise InputError(self.path, "file", f"cannot be opened ({exc})", "check the path and permissions") from exc
+            raise self._open_error(exc) from exc
         self._db = db
         try:
             db.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-            mode = db.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            # Switching to WAL takes the file's lock without calling the busy handler: while
+            # another process creates the same new store, it fails at once with "database is
+            # locked". Retry it until the busy timeout, as every other statement waits.
+            mode = _retry_locked(lambda: db.execute("PRAGMA journal_mode = WAL").fetchone()[0])
             if mode.lower() != "wal":
                 raise InputError(self.path, "journal_mode", f"could not switch to WAL (got {mode})",
                                  "put the store on a local file system")
             db.execute("PRAGMA foreign_keys = ON")
             db.execute("PRAGMA synchronous = NORMAL")  # safe with WAL; a crash loses at most the last commit
-            self._migrate()
+            _retry_locked(self._migrate)
         except sqlite3.DatabaseError as exc:
             self.close()
-            raise InputError(self.path, "file", f"is not a usable SQLite results store ({exc})",
-                             "pass a results store or a new file name") from exc
+            raise self._open_error(exc) from exc
         except BaseException:
             self.close()
             raise
 
     # -- opening -------------------------------------------------------------
 
-    def _refuse_newer(self):
-        """Read user_version through a read-only connection, so a refused store is not touched."""
+    def _open_error(self, exc):
+        """The InputError for a store that SQLite could not open or write: say what is actually wrong."""
         try:
-            ro = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
-                                 timeout=BUSY_TIMEOUT_MS / 1000)
+            check_writable(self.path, "the store")
+        except InputError:
+            return InputError(self.path, "folder", f"{self.path.parent} is not writable, and a store writes its "
+                              "journal (-wal, -shm) beside it", "copy the store to a folder you can write to, "
+                              "or make the folder writable")
+        if self.path.exists() and not os.access(self.path, os.W_OK):
+            return InputError(self.path, "file", "is read-only", "make it writable, or copy it")
+        return InputError(self.path, "file", f"is not a usable SQLite results store ({exc})",
+                          "pass a results store or a new file name")
+
+    def _inspect(self):
+        """Look at an existing file through a read-only connection, before anything is written.
+
+        Returns None for a missing or empty file, else its schema version; raises an
+        InputError for a folder, a file that is not SQLite, another program's database
+        and a store of a newer harness. A store is recognised by its application id, or,
+        for stores made before the id was set, by its four tables.
+        """
+        if self.path.is_dir():
+            raise InputError(self.path, "file", "is a folder, not a results store",
+                             "give the store.sqlite inside it")
+        if not self.path.exists() or self.path.stat().st_size == 0:
+            return None
+        try:
+            ro = self._connect_readonly(check=False)
         except sqlite3.Error as exc:
             raise InputError(self.path, "file", f"cannot be opened ({exc})", "check the path and permissions") from exc
         try:
+            app_id = ro.execute("PRAGMA application_id").fetchone()[0]
             found = ro.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in ro.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.DatabaseError as exc:
-            raise InputError(self.path, "file", f"is not an SQLite database ({exc})",
-                             "pass a results store or a new file name") from exc
+            if "not a database" in str(exc) or "malformed" in str(exc):
+                raise InputError(self.path, "file", f"is not an SQLite database ({exc})",
+                                 "pass a results store or a new file name") from exc
+            raise self._open_error(exc) from exc
         finally:
             ro.close()
+        ours = app_id == schema.APPLICATION_ID or (app_id == 0 and set(schema.TABLES) <= tables)
+        if not ours and (tables or app_id or found):
+            listed = ", ".join(sorted(tables)[:6]) + (", ..." if len(tables) > 6 else "")
+            raise InputError(self.path, "file", f"is another program's SQLite database (tables: {listed or 'none'}), "
+                             "not a results store; it was not changed",
+                             "give a store that sslpv-harness wrote, or a new file name")
         if found > schema.schema_version():
             raise InputError(self.path, "schema",
                              f"store schema v{found} is newer than this harness (v{schema.schema_version()})",
                              "upgrade the harness")
+        return found if tables else None
+
+    def _connect_readonly(self, check=True):
+        """A read-only connection. In a folder this process cannot write, SQLite cannot make the
+        WAL's shared-memory file; the store is then read as immutable, which is exact only when
+        no writer left a WAL behind, so one that did is refused."""
+        uri = self.path.resolve().as_uri()
+        try:
+            check_writable(self.path, "the store")
+            writable = True
+        except InputError:
+            writable = False
+        if not writable:
+            wal = Path(f"{self.path}-wal")
+            if check and wal.exists() and wal.stat().st_size > 0:
+                raise InputError(self.path, "folder", f"{self.path.parent} is not writable and the store has "
+                                 "changes in its -wal file that are not merged yet",
+                                 "copy the store with its -wal file to a folder you can write to")
+            uri += "?mode=ro&immutable=1"
+        else:
+            uri += "?mode=ro"
+        return sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None,
+                               check_same_thread=False)
 
     def _migrate(self):
         with self._write() as db:
@@ -164,6 +247,8 @@ class Store:
             for version in range(found, schema.schema_version()):
                 schema.MIGRATIONS[version](db)
                 db.execute(f"PRAGMA user_version = {version + 1}")
+            if db.execute("PRAGMA application_id").fetchone()[0] != schema.APPLICATION_ID:
+                db.execute(f"PRAGMA application_id = {schema.APPLICATION_ID}")
 
     def close(self):
         """Close the connection (also done on leaving the ``with`` block)."""
@@ -262,11 +347,19 @@ class Store:
         return out
 
     def run(self, run_id):
-        """One run as in :meth:`runs`, or an InputError when it does not exist."""
-        for r in self.runs():
+        """One run as in :meth:`runs`, or an InputError (naming the runs there are) when it does not exist."""
+        runs = self.runs()
+        for r in runs:
             if r["id"] == run_id:
                 return r
-        raise InputError(self.path, "run_id", f"run {run_id} does not exist", "list runs with Store.runs()")
+        ids = ", ".join(str(r["id"]) for r in runs)
+        raise InputError(self.path, "run_id", f"run {run_id} does not exist",
+                         f"pick one of {ids}" if ids else "the store has no runs yet")
+
+    def scenes(self, run_id=None):
+        """The scene names that have configurations (in ``run_id``, or in any run), sorted."""
+        sql = "SELECT DISTINCT scene FROM configurations" + (" WHERE run_id = ?" if run_id is not None else "")
+        return sorted(r[0] for r in self._read(sql + " ORDER BY scene", (run_id,) if run_id is not None else ()))
 
     # -- configurations --------------------------------------------------------
 
