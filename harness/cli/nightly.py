@@ -17,7 +17,17 @@ def configure(sp):
 
 
 def run(args):
+    """Exit 1 on a regression, and on a night whose sweep is incomplete (one line says how to resume)."""
+    import sys
+
+    from harness.errors import InputError
     from harness.regression.nightly import run_nightly_cli
 
     result = run_nightly_cli(args)
+    if result.get("status", "finished") != "finished":
+        why = result.get("error") or f"{result['failed']} of {result['configurations']} configurations failed"
+        line = InputError(result["night_dir"], f"run {result['run_id']}", f"is incomplete: {why}",
+                          "run the same nightly command again to render what is missing")
+        print(f"error: {line}", file=sys.stderr)
+        return result, None, 1
     return result, None, 1 if result.get("verdict") == "regression" else 0

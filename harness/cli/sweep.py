@@ -20,6 +20,18 @@ def configure(sp):
 
 
 def run(args):
+    """Exit 0 for a finished run; 1, with one line on stderr saying how to resume, for an incomplete one."""
+    import sys
+
+    from harness.errors import InputError
     from harness.runs.sweep import run_sweep_cli
 
-    return run_sweep_cli(args), None, 0
+    summary = run_sweep_cli(args)
+    if summary.get("status") == "finished":
+        return summary, None, 0
+    why = summary.get("error") or (f"{summary['failed']} of {summary['configurations']} configurations failed "
+                                   f"(the first: {summary.get('first_error', '?')})")
+    line = InputError(summary["sweep_json"], f"run {summary['run_id']}", f"is incomplete: {why}",
+                      f"run the same command again, or `{summary['resume']}`, to render what is missing")
+    print(f"error: {line}", file=sys.stderr)
+    return summary, None, 1

@@ -5,8 +5,9 @@ Three rules, shared by every command that writes:
 * **Only our folders.** An output folder must be new, empty, or written by the harness
   before. A folder that :func:`harness.io.atomic.atomic_dir` wrote holds :data:`MARKER`
   and is replaced as a whole; a sweep's folder (store, renders, ``sweep.json``) holds
-  :data:`SWEEP_MARKER` and is added to, never replaced. :func:`check_replaceable` and
-  :func:`claim_sweep_folder` refuse anything else with one line, so ``--out ~/Documents``
+  :data:`SWEEP_MARKER` and the nightly's reports folder :data:`NIGHTLY_MARKER`; both are
+  added to, never replaced. :func:`check_replaceable`, :func:`claim_sweep_folder` and
+  :func:`check_nightly_folder` refuse anything else with one line, so ``--out ~/Documents``
   neither wipes nor litters a user's folder.
 * **Writable before any work.** :func:`check_writable` finds the nearest existing folder
   of an output path and creates (and at once removes) an unnamed file there, so a
@@ -37,13 +38,15 @@ from pathlib import Path
 
 from harness.errors import InputError
 
-__all__ = ["MARKER", "SWEEP_MARKER", "TMP_TAG", "check_replaceable", "check_writable", "claim_sweep_folder",
-           "temp_name", "remove_leftovers"]
+__all__ = ["MARKER", "SWEEP_MARKER", "NIGHTLY_MARKER", "TMP_TAG", "check_owned_folder", "check_nightly_folder", "check_replaceable", "check_writable", "check_sweep_folder",
+           "claim_sweep_folder", "temp_name", "remove_leftovers"]
 
 #: In every folder :func:`harness.io.atomic.atomic_dir` wrote; only such folders (or empty ones) are replaced.
 MARKER = ".sslpv-output"
 #: In every sweep folder; also the sweep's lock file.
 SWEEP_MARKER = ".sslpv-sweep"
+#: In the nightly job's reports folder (``reports/nightly``), which it adds to night by night.
+NIGHTLY_MARKER = ".sslpv-nightly"
 #: In the name of every temporary file or folder the harness makes beside an output.
 TMP_TAG = "sslpv-tmp"
 
@@ -75,22 +78,55 @@ def _is_old_sweep_folder(path):
     return isinstance(data, dict) and {"scenes", "params", "out"} <= set(data)
 
 
+def _is_old_nightly_folder(path):
+    """A nightly reports folder written before :data:`NIGHTLY_MARKER` existed."""
+    return any(path.glob("runs/*/sweep.json")) or any(path.glob("*/night.json"))
+
+
+def check_owned_folder(path, marker, older=None, what="a sweep's", fix="give --out a new or empty folder"):
+    """Refuse ``path`` unless it is new, empty, holds ``marker``, or ``older(path)`` recognises it;
+    then check that it can be written."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(path, "output", "exists and is not a folder", "give --out a folder name")
+    ours = (path / marker).exists() or (older is not None and path.is_dir() and older(path))
+    if path.is_dir() and any(path.iterdir()) and not ours:
+        raise InputError(path, "output", f"is a non-empty folder that is not {what} (the harness adds to "
+                         "no other folder)", fix)
+    check_writable(path, "--out")
+
+
+def check_sweep_folder(path):
+    """Refuse ``path`` as a sweep's output unless it is new, empty, or a sweep's (or not writable)."""
+    check_owned_folder(path, SWEEP_MARKER, _is_old_sweep_folder, "a sweep's", "give --out a new or empty "
+                       "folder, or the folder of an earlier sweep to resume it")
+
+
+def check_nightly_folder(path, mark=False):
+    """Refuse ``path`` as the nightly reports folder unless it is new, empty, or the nightly's;
+    ``mark=True`` then creates and marks it."""
+    path = Path(path)
+    check_owned_folder(path, NIGHTLY_MARKER, _is_old_nightly_folder, "the nightly's reports folder",
+                       "give --out a new or empty folder, or the nightly's reports folder")
+    if mark:
+        path.mkdir(parents=True, exist_ok=True)
+        (path / NIGHTLY_MARKER).touch()
+
+
 @contextlib.contextmanager
 def claim_sweep_folder(path):
     """Hold ``path`` as a sweep's output folder while the block runs; refuse a user's folder or a busy one.
 
     The folder must be new, empty, or a sweep's (:data:`SWEEP_MARKER`, or an older sweep's
     ``sweep.json``); it is created, marked, and locked with ``flock`` until the block ends.
+    Folders it created are removed again if the block wrote nothing into them (bad input).
     """
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise InputError(path, "output", "exists and is not a folder", "give --out a folder name")
-    ours = (path / SWEEP_MARKER).exists() or _is_old_sweep_folder(path)
-    if path.is_dir() and any(path.iterdir()) and not ours:
-        hint = " (it holds another program's files, or a render or report, which sweeps do not add to)"
-        raise InputError(path, "output", f"is a non-empty folder that is not a sweep's{hint}",
-                         "give --out a new or empty folder, or the folder of an earlier sweep to resume it")
-    check_writable(path, "--out")
+    check_sweep_folder(path)
+    top = path
+    while not top.parent.exists():
+        top = top.parent
+    created = None if path.exists() else top
     path.mkdir(parents=True, exist_ok=True)
     lock_path = path / SWEEP_MARKER
     try:
@@ -106,11 +142,15 @@ def claim_sweep_folder(path):
             raise InputError(path, "output", f"is in use by another sweep ({holder})",
                              "wait until it has finished, or give --out another folder") from None
         os.ftruncate(fd, 0)
-        os.pwrite(fd, (f"sweep folder of sslpv-harness; pid {os.getpid()} on {socket.gethostname()}, since "
-                       f"{time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n").encode(), 0)
+        os.pwrite(fd, (f"pid {os.getpid()} on {socket.gethostname()} since "
+                       f"{time.strftime('%Y-%m-%dT%H:%M:%S%z')}").encode(), 0)
         yield path
     finally:
-        os.close(fd)                                 # releases the lock
+        try:
+            if created is not None and {p.name for p in path.iterdir()} <= {SWEEP_MARKER}:
+                shutil.rmtree(created, ignore_errors=True)
+        finally:
+            os.close(fd)                             # releases the lock
 
 
 # --------------------------------------------------------------------------- writable paths

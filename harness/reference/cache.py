@@ -20,6 +20,7 @@ from pathlib import Path
 
 from harness import paths
 from harness.io.atomic import atomic_dir
+from harness.io.outputs import check_replaceable, check_writable
 from harness.errors import InputError
 
 from . import render as _render
@@ -86,6 +87,9 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     if target is not None and not (0 < float(target) < 1):
         raise InputError("--target", "target", f"must be a relative standard error in (0, 1), got {target}",
                          "use e.g. 0.05")
+    if out_dir is not None:                    # refused before minutes of rendering, not after them
+        check_replaceable(out_dir)
+        check_writable(out_dir, "--out")
     kwargs = {"spp": spp, "variant": variant}
     # The scene states the noise its reference needs (dielectric scenes converge slowly).
     target = target if target is not None else scene.tolerances.get("reference_rel_se")

@@ -242,6 +242,8 @@ def scene_notes(scene):
         "g_channel_spread": spread,
         "grid_filter": GRID_FILTER,
         "integrator": {"type": "volpath", "max_depth": MAX_DEPTH, "rr_depth": RR_DEPTH},
+        # What `[mesh] repair = "close-holes"` changed in the scene's mesh (None: the mesh as given).
+        "mesh_repair": getattr(scene.mesh, "repair", None),
     }
 
 

@@ -19,6 +19,7 @@ from typing import Annotated, Literal, Optional, Union
 from pydantic import Field
 
 from harness.io.atomic import atomic_dir, atomic_write
+from harness.io.outputs import check_nightly_folder
 from harness.errors import InputError
 from harness.runs.params import check_products, config_label, param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
@@ -169,9 +170,9 @@ def write_index(out_root):
 
 
 def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True):
-    from harness.report.build import build_report
-    from harness.store import Store
+    from harness.progress import Progress
     from harness.runs.sweep import SweepConfig, run_sweep
+    from harness.store import Store
 
     matrix = load_matrix(matrix_path)
     night = night or _date.today().isoformat()
@@ -180,9 +181,27 @@ def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, w
     except ValueError:
         raise InputError("--date", "date", f"{night!r} is not YYYY-MM-DD", "write e.g. 2026-11-22") from None
     out_root = Path(out_root)
+    # ---- (issue 13) every output is checked before anything is written: a user's folder as
+    # --out, a folder that cannot be written, another program's or a corrupt store
+    check_nightly_folder(out_root)
+    Store.check(store_path)
     cfg = SweepConfig(scenes=matrix["scenes"], params=matrix["params"], out=str(out_root / "runs" / night),
                       store=str(store_path), size=matrix["size"], kind="nightly")
-    summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress)
+    with Progress("nightly", 3, unit="steps", enabled=progress) as steps:
+        steps.log(f"{night}: the matrix {matrix['path']}, {len(matrix['scenes'])} scenes, store {store_path}")
+        summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress)
+        check_nightly_folder(out_root, mark=True)
+        steps.advance(failed=int(summary["status"] != "finished"),
+                      detail=f"sweep {summary['status']}: {summary['ok']} ok, {summary['failed']} failed")
+        result = _judge_and_report(matrix, store_path, out_root, night, summary, steps)
+    return result
+
+
+def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
+    """Verdicts against the previous night and the baselines, the night's report, the index."""
+    from harness.report.build import build_report
+    from harness.store import Store
+
     run_id = summary["run_id"]
     tol = matrix["tolerance"]
     with Store(store_path) as st:
@@ -196,6 +215,7 @@ def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, w
         base = baseline_rows(matrix["scenes"], matrix["size"])
         changes += compare_rows(base, now_rows, tol, "baseline")
         verdict = overall(changes)
+        steps.advance(detail=f"verdict: {verdict}")
         night_dir = out_root / night
         with atomic_dir(night_dir) as tmp:
             build_report(store_path, tmp / "report", run_id=run_id, title=f"SSLPV nightly {night}")
@@ -215,12 +235,17 @@ def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, w
             (tmp / "night.json").write_text(json.dumps(info, indent=1))
             (tmp / "index.html").write_text(_render("night.html.j2", info=info, trends=trends, changes=flagged))
     index = write_index(out_root)
-    return {"verdict": verdict, "date": night, "night_dir": str(night_dir), "index": str(index),
-            "store": str(store_path), "run_id": run_id, "regressions": len(info["regressions"]),
-            "improvements": len(info["improvements"]), "configurations": summary["configurations"],
-            "failed": summary["failed"], "sweep_wall_s": summary.get("wall_s")}
+    steps.advance(detail=f"report {night_dir}")
+    out = {"verdict": verdict, "date": night, "night_dir": str(night_dir), "index": str(index),
+           "store": str(store_path), "run_id": run_id, "regressions": len(info["regressions"]),
+           "improvements": len(info["improvements"]), "configurations": summary["configurations"],
+           "failed": summary["failed"], "not_run": summary.get("not_run", 0), "status": summary["status"],
+           "sweep_wall_s": summary.get("wall_s")}
+    if summary["status"] != "finished":
+        out["resume"], out["error"] = summary.get("resume"), summary.get("error")
+    return out
 
 
 def run_nightly_cli(args):
-    return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler,
-                       progress=not args.json)
+    """Progress on stderr (``harness.progress``); the result on stdout."""
+    return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler)

@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 from harness.io.atomic import atomic_dir
+from harness.io.outputs import check_replaceable, check_writable
 from harness.io.images import auto_exposure, write_exr, write_png
 from harness.scene import load_scene
 
@@ -48,6 +49,8 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
     params = params or SSLPVParams()
     scene = load_scene(scene_name_or_path)
     out_dir = Path(out_dir) if out_dir is not None else Path("renders") / scene.name
+    check_replaceable(out_dir)                 # refused before the render, not after it
+    check_writable(out_dir, "--out")
     result = (renderer or SSLPVRenderer()).render(scene, params)
     exposure = auto_exposure(result.full)
     info = {
@@ -62,6 +65,7 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
         "covered_pixels": int(result.mask.sum()),
         "preview_exposure": exposure,
         "warnings": list(result.warnings),
+        "mesh_repair": scene.mesh.repair,
         "method": "SSLPV (Borlum et al., HPG 2011), GLSL renderer sslpv_gl",
     }
     write_render_dir(out_dir, result.full, result.subsurface, result.mask, info, result.full, exposure)

@@ -73,9 +73,10 @@ from pydantic import Field
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from harness.io.atomic import atomic_write
-from harness.errors import InputError
-from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, expand, param_lists_model, \
-    parse_lists, product_dict
+from harness.io.outputs import check_sweep_folder, check_writable, claim_sweep_folder
+from harness.errors import EnvironmentProblem, InputError
+from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, config_label, expand, \
+    param_lists_model, parse_lists, product_dict
 from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, ImageSize, read_json, validate
 
 from harness.scene import list_scenes, load_scene, scene_path
@@ -170,6 +171,12 @@ def resolve_scenes(spec, where="--scenes", field="scenes"):
 
 def config_from_args(args):
     if args.config:
+        # The file holds the whole configuration: a flag beside it would be silently ignored.
+        given = [k for k in (*CLI_TO_FIELD, "scenes", "size", "store") if getattr(args, k, None) is not None]
+        if given:
+            flag = "--" + given[0].replace("_", "-")
+            raise InputError(flag, given[0], "cannot be combined with --config (the file holds the whole sweep)",
+                             "edit the sweep.json, or drop --config")
         cfg = SweepConfig.from_file(args.config)
         if args.out:
             cfg.out = str(args.out)
@@ -214,6 +221,33 @@ def reference_dir(scene, target=None):
     return Path(reference_for(scene, cache_dir=None, **kwargs))
 
 
+def _reference_source(scene, target):
+    """Where a scene's reference will come from, for the progress log."""
+    from harness.reference.cache import cache_path, read_reference_meta
+    from harness.reference.committed import find_committed_reference
+
+    if find_committed_reference(scene) is not None:
+        return "the committed small reference"
+    meta = read_reference_meta(cache_path(scene))
+    if meta is not None and meta.get("content_hash") == scene.content_hash:
+        return f"the cache ({cache_path(scene)})"
+    target = target or scene.tolerances.get("reference_rel_se") or 0.05
+    return f"not cached: rendering it with Mitsuba to {100 * float(target):g} % median relative SE (minutes)"
+
+
+def fetch_references(scenes, target, progress=True):
+    """Each scene's reference folder (committed, cached, or rendered now), one progress line per scene."""
+    from harness.progress import Progress
+
+    refs = {}
+    with Progress("references", len(scenes), unit="references", enabled=progress) as bar:
+        for s in scenes:
+            bar.log(f"{s.name}: {_reference_source(s, target)}")
+            refs[s.name] = reference_dir(s, target)
+            bar.advance(detail=s.name)
+    return refs
+
+
 # --------------------------------------------------------------------------- cluster
 
 class ReleaseGL(WorkerPlugin):
@@ -256,13 +290,24 @@ def make_client(scheduler=None, workers=None, lp_threads=None):
         except (OSError, TimeoutError) as exc:
             raise InputError("--scheduler", "scheduler", f"cannot reach Dask scheduler {scheduler!r} ({exc})",
                              "start it with 'dask scheduler' or drop --scheduler for a local cluster") from exc
+        except Exception as exc:  # distributed's parser: ValueError, AssertionError, ...
+            why = str(exc).strip().splitlines()[0] if str(exc).strip() else "unknown protocol"
+            raise InputError("--scheduler", "scheduler", f"{scheduler!r} is not a Dask scheduler address ({why})",
+                             "write e.g. tcp://127.0.0.1:8786") from None
     else:
         n = workers or os.cpu_count() or 1
         lp = DEFAULT_LP_THREADS if lp_threads is None else lp_threads
         # LP_NUM_THREADS already in the environment wins; "default" leaves llvmpipe's own choice.
         env = {} if lp == "default" or "LP_NUM_THREADS" in os.environ else {"LP_NUM_THREADS": str(int(lp))}
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=50, env=env)
+        try:
+            # The scheduler serves HTTP (health, metrics) even without a dashboard, by default on
+            # 0.0.0.0:8787, and warns on stderr when another cluster holds that port: a free
+            # localhost port instead.
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=50, env=env, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+        except Exception as exc:  # a worker that died while starting: "Nanny failed to start."
+            raise EnvironmentProblem(f"Dask could not start {n} local worker processes ({exc}); check the free "
+                                     "memory and processes, then run the same command again") from exc
         client = Client(cluster)
     client.register_plugin(ReleaseGL())
     return client, cluster
@@ -318,6 +363,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     same rows, with bit-identical images and metrics. ``lp_threads`` sets
     ``LP_NUM_THREADS`` for a LocalCluster's workers (see :data:`DEFAULT_LP_THREADS`).
     """
+    from harness.progress import Progress
     from harness.store import Store
 
     t0 = time.perf_counter()
@@ -329,38 +375,43 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     scenes = [load_scene(n) for n in cfg.scenes]
     if cfg.size:
         scenes = [s.with_resolution(*cfg.size) for s in scenes]
+    # ---- every output is checked before the first thing is written (and before minutes of references)
+    check_sweep_folder(out)
+    check_writable(store_path, "--store")
+    Store.check(store_path)                  # another program's database, a corrupt or newer store: refused
     client, cluster = make_client(scheduler, workers, lp_threads) if scheduler else (None, None)
     try:
-        refs = {}
-        for s in scenes:
-            # A missing reference is rendered here, which can take minutes: say so.
-            with _status(progress, f"reference of {s.name}: from the cache, or rendering it with Mitsuba"):
-                refs[s.name] = reference_dir(s, cfg.reference_target)
-        arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width)) for s in scenes}
-
-        out.mkdir(parents=True, exist_ok=True)
-        cfg.store = str(store_path)
-        with atomic_write(out / SWEEP_FILE) as tmp:
-            tmp.write_text(cfg.to_json())
-        with Store(store_path) as store:
-            run_id = _resume_or_start(store, cfg, out)
-            done = store.done_keys(run_id)
-            todo = [(s, p, key) for s in scenes for p in configs
-                    if (key := store.config_key(s.content_hash, p.as_dict())) not in done]
-            summary = {"out": str(out), "store": str(store_path), "run_id": run_id,
-                       "sweep_json": str(out / SWEEP_FILE), "configurations": len(scenes) * len(configs),
-                       "skipped_done": len(scenes) * len(configs) - len(todo), "ok": 0, "failed": 0,
-                       "references": {k: str(v) for k, v in refs.items()}, "gl_renderer": None}
-            groups = group_configs(todo, group)
-            summary["groups"] = len(groups)
-            if todo:
-                if client is None:
-                    client, cluster = make_client(None, workers, lp_threads)
-                _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress)
-            # A run with failed configurations stays open: the same command retries them.
-            status = "finished" if summary["failed"] == 0 else "incomplete"
-            store.finish_run(run_id, status, gl_renderer=summary["gl_renderer"])
-            summary["status"] = status
+        with claim_sweep_folder(out):        # held until the sweep ends: a second sweep here is refused
+            refs = fetch_references(scenes, cfg.reference_target, progress)
+            arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width)) for s in scenes}
+            cfg.store = str(store_path)
+            with atomic_write(out / SWEEP_FILE) as tmp:
+                tmp.write_text(cfg.to_json())
+            with Store(store_path) as store:
+                run_id = _resume_or_start(store, cfg, out)
+                done = store.done_keys(run_id)
+                todo = [(s, p, key) for s in scenes for p in configs
+                        if (key := store.config_key(s.content_hash, p.as_dict())) not in done]
+                summary = {"out": str(out), "store": str(store_path), "run_id": run_id,
+                           "sweep_json": str(out / SWEEP_FILE), "configurations": len(scenes) * len(configs),
+                           "skipped_done": len(scenes) * len(configs) - len(todo), "ok": 0, "failed": 0,
+                           "not_run": 0, "references": {k: str(v) for k, v in refs.items()}, "gl_renderer": None}
+                groups = group_configs(todo, group)
+                summary["groups"] = len(groups)
+                if todo:
+                    if client is None:
+                        if progress:
+                            Progress("sweep", None).log(f"starting a local Dask cluster of "
+                                                        f"{workers or os.cpu_count() or 1} workers")
+                        client, cluster = make_client(None, workers, lp_threads)
+                    _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress)
+                # A run with failed (or never rendered) configurations stays open: the same command
+                # retries them, and the command line exits non-zero.
+                status = "finished" if summary["failed"] == 0 and summary["not_run"] == 0 else "incomplete"
+                store.finish_run(run_id, status, gl_renderer=summary["gl_renderer"])
+                summary["status"] = status
+                if status != "finished":
+                    summary["resume"] = f"sslpv-harness sweep --config {out / SWEEP_FILE}"
     finally:
         if client is not None:
             client.close()
@@ -370,52 +421,124 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     return summary
 
 
+#: Seconds a sweep waits for a Dask worker when its cluster has none before it stops (incomplete).
+NO_WORKERS_TIMEOUT_S = 60.0
+#: How often a step group is submitted again after its reference was lost with dead workers.
+MAX_RESUBMITS = 3
+
+
+def _lost_data(exc):
+    """Was a task cancelled by the cluster ("lost dependencies": the workers that held its
+    scattered reference died), rather than failed by itself (an error, ``KilledWorker``)?"""
+    return type(exc).__name__ in ("FutureCancelledError", "CancelledError")
+
+
+class _NoWorkers(Exception):
+    pass
+
+
 def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress):
     """Submit every step group, then record each configuration as its group arrives (client-side only).
 
-    Test hook: with ``SSLPV_SWEEP_CRASH_MID_GROUP=1`` the client kills its own process
+    Dead workers: a LocalCluster's nannies start new ones, and Dask runs a task that was on
+    a dead worker again (``retries``; one that kills its worker three times fails with
+    ``KilledWorker`` and is recorded as failed). The scattered references die with the
+    workers that held them, and the tasks that need them are cancelled ("lost
+    dependencies"): such a group is submitted again with its reference scattered anew
+    (:data:`MAX_RESUBMITS` times; ``SSLPV_SWEEP_MAX_RESUBMITS`` overrides it). When the
+    cluster has had no worker for :data:`NO_WORKERS_TIMEOUT_S`, the sweep stops: what is not recorded is counted in
+    ``not_run``, the run stays incomplete, and the same command continues it.
+
+    Test hooks: with ``SSLPV_SWEEP_CRASH_MID_GROUP=1`` the client kills its own process
     group (itself and a LocalCluster's workers, as a crash would) right after recording
     the first configuration of a group of two or more; nothing else of that group is
     recorded. Only for the tests: run it in a process group of its own.
+    ``SSLPV_SWEEP_KILL_WORKERS=1`` makes every task kill its worker (``harness.runs.worker``).
     """
-    from dask.distributed import as_completed
-
     from harness.io.images import auto_exposure
+    from harness.progress import Progress
 
     from harness.runs import worker as sweep_worker
 
     shared = {}
-    for name, arr in arrays.items():
+
+    def share(name):
         # Scatter the dict as ONE object: scattering a dict scatters its values under its keys
         # ("subsurface", "mask", ...), and every scene would then overwrite the previous one's.
+        arr = arrays[name]
         shared[name] = (client.scatter([arr], broadcast=True)[0], sweep_worker.reference_floors(arr),
                         auto_exposure(arr["subsurface"]))
-    futures = {}
+
+    for name in arrays:
+        share(name)
+    pending, attempts = {}, [0] * len(groups)
     n_groups = len(groups)
-    for i, (s, p, members) in enumerate(groups):
+
+    def submit(i):
+        s, p, members = groups[i]
         ref_f, floors, _ = shared[s.name]
         ks = [k for k, _ in members]
         tag = members[0][1] if len(members) == 1 else "group-" + members[0][1] + f"-{len(members)}"
+        tag += f"-r{attempts[i]}" if attempts[i] else ""
         # Priority: groups come largest first; Dask runs higher priorities first.
         fut = client.submit(sweep_worker.run_group, str(s.path), cfg.size, p.as_dict(), ks, ref_f, floors,
                             key=f"sslpv-{tag}", pure=False, retries=2, priority=n_groups - i)
-        futures[fut] = (s, p, members)
+        pending[fut] = i
+
+    for i in range(n_groups):
+        submit(i)
     crash_mid_group = os.environ.get("SSLPV_SWEEP_CRASH_MID_GROUP") == "1"
+    total = sum(len(m) for _, _, m in groups)
     try:
-        with _progress(progress, sum(len(m) for _, _, m in futures.values())) as advance:
-            for fut in as_completed(list(futures)):
-                s, p, members = futures.pop(fut)
-                try:
-                    results = fut.result()
-                except Exception as exc:  # a worker died more often than the retries allow
-                    err = f"{type(exc).__name__}: {exc}".splitlines()[0]
-                    results = [{"status": "failed", "error": err} for _ in members]
-                for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
-                    pk = p.replace(steps=k)
-                    _record(store, run_id, s, pk, key, res, out, refs, summary, shared[s.name][2])
-                    advance(f"{s.name} N={pk.N} K={pk.steps} {pk.mapping}")
-                    if crash_mid_group and n_recorded == 0 and len(members) > 1:
-                        _crash()
+        with Progress("sweep", total, unit="configurations", enabled=progress) as bar:
+            no_workers_since = None
+            idle_since = time.monotonic()
+            while pending:
+                # Polled rather than distributed.wait(), which raises as soon as one future is cancelled.
+                done = [f for f in pending if f.done()]
+                if not done:
+                    time.sleep(0.1)
+                    if time.monotonic() - idle_since < 2.0:
+                        continue
+                    idle_since = time.monotonic()
+                    if client.scheduler_info().get("workers"):
+                        no_workers_since = None
+                    elif no_workers_since is None:
+                        no_workers_since = time.monotonic()
+                        bar.log("the cluster has no workers: waiting for new ones")
+                    elif time.monotonic() - no_workers_since > NO_WORKERS_TIMEOUT_S:
+                        raise _NoWorkers()
+                    continue
+                for fut in done:
+                    i = pending.pop(fut)
+                    s, p, members = groups[i]
+                    try:
+                        results = fut.result()
+                    except Exception as exc:  # a worker died more often than the retries allow
+                        if _lost_data(exc) and attempts[i] < int(os.environ.get("SSLPV_SWEEP_MAX_RESUBMITS",
+                                                                                MAX_RESUBMITS)):
+                            attempts[i] += 1
+                            if shared[s.name][0].status != "finished":
+                                bar.log(f"the reference of {s.name} was lost with dead workers: scattering it again")
+                                client.wait_for_workers(1, timeout=NO_WORKERS_TIMEOUT_S)
+                                share(s.name)
+                            submit(i)
+                            continue
+                        err = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                        results = [{"status": "failed", "error": err} for _ in members]
+                    for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
+                        pk = p.replace(steps=k)
+                        _record(store, run_id, s, pk, key, res, out, refs, summary, shared[s.name][2])
+                        bar.advance(failed=int(res["status"] != "ok"),
+                                    detail=f"{s.name} N={pk.N} K={pk.steps} {pk.mapping}")
+                        if crash_mid_group and n_recorded == 0 and len(members) > 1:
+                            _crash()
+    except (_NoWorkers, TimeoutError) as exc:
+        # No worker came back: stop here; what was recorded stays, the rest is left for a re-run.
+        summary["not_run"] = sum(len(groups[i][2]) for i in pending.values())
+        summary["error"] = (f"the Dask cluster lost all its workers and none came back within "
+                            f"{NO_WORKERS_TIMEOUT_S:g} s" + (f" ({exc})" if str(exc) else ""))
+        client.cancel(list(pending))
     except KeyboardInterrupt:
         store.finish_run(run_id, "interrupted", gl_renderer=summary["gl_renderer"])
         raise
@@ -432,6 +555,7 @@ def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
         summary["ok"] += 1
     else:
         summary["failed"] += 1
+        summary.setdefault("first_error", f"{s.name} {config_label(p)}: {res.get('error')}")
     store.record_config(run_id, s.name, s.content_hash, p.as_dict(), res["status"],
                         error=res.get("error"), metrics=res.get("metrics", []),
                         timings=res.get("timings", {}),
@@ -461,48 +585,10 @@ def _resume_or_start(store, cfg, out):
     return store.start_run(cfg.kind, cfg_json, out_dir=str(out), git_commit=git_commit())
 
 
-def _status(enabled, text):
-    import contextlib
-
-    if not enabled:
-        return contextlib.nullcontext()
-    from rich.console import Console
-
-    return Console(stderr=True).status(text)
-
-
-class _progress:
-    """A rich progress bar with an ETA, or nothing."""
-
-    def __init__(self, enabled, total):
-        self.enabled, self.total = enabled, total
-
-    def __enter__(self):
-        if not self.enabled:
-            return lambda label: None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, \
-            TimeRemainingColumn
-
-        self.bar = Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                            TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.description}"),
-                            transient=False)
-        self.bar.__enter__()
-        task = self.bar.add_task("", total=self.total)
-        return lambda label: self.bar.update(task, advance=1, description=label)
-
-    def __exit__(self, *exc):
-        if self.enabled:
-            self.bar.__exit__(*exc)
-        return False
-
-
 def run_sweep_cli(args):
+    """``sslpv-harness sweep``: progress on stderr (``harness.progress``), the summary on stdout."""
     cfg = config_from_args(args)
-    import sys
-
-    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers,
-                     progress=not args.no_progress and not args.json and sys.stderr.isatty() or
-                     (not args.no_progress and not args.json))
+    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
 
 
 __all__ = ["SweepConfig", "run_sweep", "run_sweep_cli", "FIELD_TO_CLI"]

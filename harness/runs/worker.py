@@ -135,7 +135,12 @@ def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=Tru
     t0 = time.perf_counter()
     ks = list(steps_list)
     out = [None] * len(ks)
-    # Fault injection for the sweep's own tests: the configuration with this label fails.
+    # Fault injection for the sweep's own tests: the configuration with this label fails;
+    # SSLPV_SWEEP_KILL_WORKERS=1 kills the worker process, as the OOM killer would.
+    if os.environ.get("SSLPV_SWEEP_KILL_WORKERS") == "1":
+        import signal
+
+        os.kill(os.getpid(), signal.SIGKILL)
     inject_fail = os.environ.get("SSLPV_SWEEP_FAIL_CONFIG")
     todo = []
     for i, k in enumerate(ks):

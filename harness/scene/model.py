@@ -27,7 +27,7 @@ from harness.scene.geometry import MeshSpec, points_inside
 from harness.validation import FieldProblem, ImageSize, InputModel, NonNegative, Vec3
 
 __all__ = ["SceneFile", "CameraSpec", "LightSpec", "IndexMatchedBoundary", "DielectricBoundary", "BoundarySpec",
-           "MediumSpec", "Tolerances", "json_schema", "BOUNDARY_KINDS"]
+           "MediumSpec", "Tolerances", "json_schema", "schema_text", "BOUNDARY_KINDS"]
 
 BOUNDARY_KINDS = ("index-matched", "dielectric")
 #: Each grid's allowed range: (low, high, low open, high open).
@@ -192,9 +192,22 @@ class SceneFile(InputModel):
 
 
 def json_schema():
-    """The JSON Schema of ``scene.toml`` (draft 2020-12), with descriptions and examples for editors."""
-    schema = SceneFile.model_json_schema()
-    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["$id"] = "https://sslpv-harness/reference_scenes/scene.schema.json"
-    schema["title"] = "SSLPV harness scene.toml"
+    """The JSON Schema of ``scene.toml``, with descriptions and examples for editors.
+
+    Written as draft-07 (``definitions``, not ``$defs``): the TOML language servers (taplo,
+    behind VS Code's Even Better TOML) read drafts 4 to 7, not the 2020-12 form pydantic
+    writes by default. The rules that no schema can state (a closed mesh, a box that encloses
+    it, a camera outside the object) are left to the loader.
+    """
+    schema = SceneFile.model_json_schema(ref_template="#/definitions/{model}")
+    schema = {"$schema": "http://json-schema.org/draft-07/schema#", "title": "SSLPV harness scene.toml",
+              **{k: v for k, v in schema.items() if k not in ("$defs", "title")},
+              "definitions": schema.get("$defs", {})}
     return schema
+
+
+def schema_text():
+    """:func:`json_schema` as the text of ``reference_scenes/scene.schema.json``."""
+    import json
+
+    return json.dumps(json_schema(), indent=1, sort_keys=False) + "\n"

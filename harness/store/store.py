@@ -160,6 +160,14 @@ class Store:
             self.close()
             raise
 
+    @classmethod
+    def check(cls, path):
+        """Refuse, without writing anything, what ``Store(path)`` would refuse: a folder, a file that
+        is not SQLite, another program's database, a newer store. Returns its schema version (None: new)."""
+        probe = cls.__new__(cls)
+        probe.path, probe.readonly, probe._db = Path(path), True, None
+        return probe._inspect()
+
     # -- opening -------------------------------------------------------------
 
     def _open_error(self, exc):
