@@ -301,11 +301,16 @@ def _bounds(meta):
                 return inner
     if lo is None and hi is None:
         return None
+    lo, hi = _num(lo), _num(hi)
     if hi is None:
-        return f"{'>' if lo_open else '>='} {lo:g}"
+        return f"{'>' if lo_open else '>='} {lo}"
     if lo is None:
-        return f"{'<' if hi_open else '<='} {hi:g}"
-    return f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        return f"{'<' if hi_open else '<='} {hi}"
+    return f"in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+
+
+def _num(x):
+    return None if x is None else str(x) if isinstance(x, int) else f"{x:g}"
 
 
 def _lengths(meta):
@@ -412,8 +417,10 @@ def _words(ann, meta_extra=(), plural=False):
     if origin in (list, tuple, set):
         args = typing.get_args(base)
         lo, hi = _lengths(meta)
-        count = f"{lo} " if lo is not None and lo == hi else f"at least {lo} " if lo else ""
         item = _words(args[0], plural=True) if args else "items"
+        if lo == 1 and hi is None:
+            return f"a non-empty list of {item}" if item else "a non-empty list"
+        count = f"{lo} " if lo is not None and lo == hi else f"at least {lo} " if lo else ""
         return f"a list of {count}{item}" if item else "a list"
     if origin is dict:
         return "a table"

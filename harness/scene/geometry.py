@@ -212,6 +212,13 @@ def build_mesh(spec, scene_dir):
             raise FieldProblem("path", f"cannot read {path.name} ({str(exc).strip() or type(exc).__name__})",
                                "give a PLY or OBJ file") from exc
         v, f = _from_meshset(ms)
+        declared = _declared_vertices(path)
+        if declared is not None and len(v) < declared:
+            # MeshLab drops vertices whose coordinates are not finite numbers (and the faces
+            # that use them): left alone, that is reported as a mesh that is not closed.
+            raise FieldProblem("path", f"{path.name} declares {declared} vertices but only {len(v)} have finite "
+                               "coordinates (NaN or infinite ones are dropped on reading)",
+                               "fix or remove those vertices in the file")
         bad = ~np.isfinite(v).all(axis=1)
         if bad.any():
             raise FieldProblem("path", f"{path.name} has {int(bad.sum())} vertices with NaN or infinite "
@@ -229,6 +236,26 @@ def build_mesh(spec, scene_dir):
     if signed_volume(mesh) < 0:
         mesh = Mesh(v, f[:, ::-1].copy(), -normals, repair)
     return mesh
+
+
+def _declared_vertices(path):
+    """The vertex count a PLY header or an OBJ file states (None for other formats or a header that is unclear)."""
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".ply":
+            with open(path, "rb") as fh:
+                for raw in fh:
+                    line = raw.decode("latin-1").strip()
+                    if line.startswith("element vertex"):
+                        return int(line.split()[2])
+                    if line == "end_header":
+                        return None
+        elif suffix == ".obj":
+            with open(path, "rb") as fh:
+                return sum(1 for raw in fh if raw.startswith(b"v ") or raw.startswith(b"v\t"))
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def _topology(vertices, faces, weld=True):

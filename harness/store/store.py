@@ -198,6 +198,8 @@ class Store:
             return None
         try:
             ro = self._connect_readonly(check=False)
+        except InputError:
+            raise
         except sqlite3.Error as exc:
             raise InputError(self.path, "file", f"cannot be opened ({exc})", "check the path and permissions") from exc
         try:
@@ -224,23 +226,29 @@ class Store:
         return found if tables else None
 
     def _connect_readonly(self, check=True):
-        """A read-only connection. In a folder this process cannot write, SQLite cannot make the
-        WAL's shared-memory file; the store is then read as immutable, which is exact only when
-        no writer left a WAL behind, so one that did is refused."""
+        """A connection that is only read from, and that leaves the folder as it found it.
+
+        SQLite's ``mode=ro`` on a WAL store creates the ``-wal`` and ``-shm`` files and, not
+        allowed to write, leaves them behind; so where the folder is writable and they do not
+        exist yet, the connection is an ordinary one that is never written through (the last
+        one to close removes them). Where they exist, ``mode=ro`` uses them as they are. In a
+        folder this process cannot write, the store is read as immutable, which is exact
+        only when no writer left a WAL behind, so one that did is refused.
+        """
         uri = self.path.resolve().as_uri()
         try:
             check_writable(self.path, "the store")
             writable = True
         except InputError:
             writable = False
+        wal = Path(f"{self.path}-wal")
         if not writable:
-            wal = Path(f"{self.path}-wal")
-            if check and wal.exists() and wal.stat().st_size > 0:
+            if wal.exists() and wal.stat().st_size > 0:
                 raise InputError(self.path, "folder", f"{self.path.parent} is not writable and the store has "
                                  "changes in its -wal file that are not merged yet",
                                  "copy the store with its -wal file to a folder you can write to")
             uri += "?mode=ro&immutable=1"
-        else:
+        elif wal.exists() or Path(f"{self.path}-shm").exists():
             uri += "?mode=ro"
         return sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None,
                                check_same_thread=False)

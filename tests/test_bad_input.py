@@ -1,0 +1,510 @@
+"""Bad input through the command line: every case exits 2, prints exactly ONE line on stderr
+that names the file or setting and the field, and leaves no file behind (issue 13).
+
+The cases cover scene files, command-line values, sweep configurations (``--config``), the
+nightly matrix, stores and EXRs, and include every example the issue lists. Each runs
+``harness.cli.main`` in this process (a traceback would fail the test as an exception),
+with the folder it works in compared before and after. The accuracy matrix has no command
+of its own; its cases call the loader that ``pytest -m accuracy`` uses.
+"""
+
+import hashlib
+import json
+import re
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness.cli import main
+from harness.errors import InputError
+from harness.io.images import write_exr
+from harness.scene import SUITE_DIR
+from harness.store import Store
+
+REPO = Path(__file__).resolve().parent.parent
+# A small, valid scene: the suite's white sphere at a 16^3 grid (fast to load).
+GOOD = (SUITE_DIR / "sphere_homogeneous" / "scene.toml").read_text().replace(
+    "resolution = [64, 64, 64]", "resolution = [16, 16, 16]")
+JADE = (SUITE_DIR / "jade_veins" / "scene.toml").read_text().replace(
+    "resolution = [64, 64, 64]", "resolution = [16, 16, 16]")
+SWEEP = ["sweep", "--scenes", "thin_ring", "--grid", "8", "--steps", "4", "--workers", "1", "--size", "64x64"]
+
+
+def snapshot(root):
+    """Every file under ``root`` with its size and content hash (what 'nothing left behind' compares)."""
+    out = {}
+    for p in sorted(Path(root).rglob("*")):
+        if p.is_file():
+            out[str(p.relative_to(root))] = hashlib.sha256(p.read_bytes()).hexdigest()
+        else:
+            out[str(p.relative_to(root))] = "dir"
+    return out
+
+
+@pytest.fixture
+def cli(tmp_path, capsys, monkeypatch):
+    """``cli(argv, *needles)``: run, then check exit 2 (or 3), one stderr line with the needles, no new files."""
+    monkeypatch.setenv("SSLPV_CACHE", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+
+    def run(argv, *needles, codes=(2, 3)):
+        before = snapshot(tmp_path)
+        capsys.readouterr()
+        code = main([str(a) for a in argv])
+        captured = capsys.readouterr()
+        lines = [line for line in captured.err.splitlines() if line.strip()]
+        assert code in codes, (code, captured.err)
+        assert len(lines) == 1, captured.err
+        assert lines[0].startswith("error: "), lines[0]
+        for needle in needles:
+            assert str(needle) in lines[0], (needle, lines[0])
+        after = snapshot(tmp_path)
+        changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+        assert not changed, f"files were left behind or changed: {changed}"
+        assert captured.out == "", captured.out     # stdout carries only a result, and there is none
+        return lines[0]
+
+    return run
+
+
+def scene_dir(tmp_path, text, files=None, name="scene_under_test"):
+    folder = tmp_path / name
+    folder.mkdir(exist_ok=True)
+    (folder / "scene.toml").write_text(text) if isinstance(text, str) else (folder / "scene.toml").write_bytes(text)
+    for fname, writer in (files or {}).items():
+        writer(folder / fname)
+    return folder
+
+
+def ply(path, vertices, faces):
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(vertices)}", "property float x", "property float y",
+             "property float z", f"element face {len(faces)}", "property list uchar int vertex_indices",
+             "end_header"] + [" ".join(map(str, p)) for p in vertices] + [f"3 {a} {b} {c}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def cube_ply(path, nan=False):
+    v = [[-.5, -.5, -.5], [.5, -.5, -.5], [.5, .5, -.5], [-.5, .5, -.5],
+         [-.5, -.5, .5], [.5, -.5, .5], [.5, .5, .5], [-.5, .5, .5]]
+    if nan:
+        v[6] = ["nan", 0.5, 0.5]
+    f = [(0, 2, 1), (0, 3, 2), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7),
+         (2, 7, 6), (3, 0, 4), (3, 4, 7)]
+    ply(path, v, f)
+
+
+FILE_MESH = 'kind = "file"\npath = "m.ply"'
+SPHERE_MESH = 'kind = "sphere"\nradius = 1.0\nsubdivisions = 4'
+
+
+# --------------------------------------------------------------------------- scene files
+# (id, scene text, expected field, expected words); rendered with `render SCENE --out o`.
+SCENE_CASES = [
+    # unknown keys inside tables (the issue: silently ignored before)
+    ("fovy-in-camera", GOOD.replace("fov_y = 34.0", "fov_y = 34.0\nfovy = 60"), "camera.fovy", "not a known field"),
+    ("sigma_s-in-medium", GOOD.replace("[medium]", "[medium]\nsigma_s = 3.0"), "medium.sigma_s", "not a known field"),
+    ("radiuss-in-mesh", GOOD.replace("radius = 1.0", "radiuss = 1.0"), "mesh.radiuss", "not a known field"),
+    ("unknown-top-level", "colour = 3\n" + GOOD, "colour", "not a known field"),
+    ("unknown-in-lights", GOOD.replace("intensity = [12.0", "power = 3\nintensity = [12.0"), "lights[0].power",
+     "not a known field"),
+    ("unknown-in-tolerances", GOOD.replace("[tolerances]", "[tolerances]\nssim = 0.9"), "tolerances.ssim",
+     "not a known field"),
+    ("unknown-in-field", GOOD.replace('value = [8.0, 8.0, 8.0]}', 'value = [8.0, 8.0, 8.0], seed = 2}'),
+     "medium.sigma_t.seed", "not a known field"),
+    ("eta-under-index-matched", GOOD.replace('kind = "index-matched"', 'kind = "index-matched"\neta = 1.3'),
+     "boundary.eta", "not a known field"),
+    # wrong types (the issue: tracebacks before)
+    ("origin-string", GOOD.replace("origin = [0.0, 0.3, 4.2]", 'origin = ["a", 0.3, 4.2]'), "camera.origin[0]",
+     "must be a number"),
+    ("intensity-string", GOOD.replace("intensity = [12.0, 12.0, 12.0]", 'intensity = "bright"'),
+     "lights[0].intensity", "must be a list of 3 numbers"),
+    ("field-value-string", GOOD.replace("value = [8.0, 8.0, 8.0]", 'value = ["x", 8, 8]'),
+     "medium.sigma_t.value[0]", "must be a number"),
+    ("frequency-string", JADE.replace("frequency = 1.2", 'frequency = "high"', 1), "medium.sigma_t.frequency",
+     "must be a number"),
+    ("lights-of-strings", GOOD.replace("[[lights]]\nposition = [2.5, 1.8, 2.2]\nintensity = [12.0, 12.0, 12.0]\n",
+                                       "").replace("tags = ", 'lights = ["a"]\ntags = '), "lights[0]",
+     "must be a table"),
+    ("rel-se-string", GOOD.replace("reference_rel_se = 0.05", 'reference_rel_se = "tight"'),
+     "tolerances.reference_rel_se", "must be a number in (0, 1)"),
+    ("radius-string-not-evaluated", GOOD.replace("radius = 1.0", "radius = \"__import__('os')\""), "mesh.radius",
+     "must be a number"),
+    ("width-bool", GOOD.replace("width = 128", "width = true"), "camera.width", "must be an integer"),
+    ("camera-not-table", GOOD.replace("[camera]\n", "camera = 5\n[cam]\n"), "mesh.camera", "not a known field"),
+    ("g-not-table", GOOD.replace('g = {kind = "constant", value = [0.0, 0.0, 0.0]}', "g = 0.5"), "medium.g",
+     "must be a table"),
+    ("tags-string", GOOD.replace('tags = ["homogeneous", "high-albedo"]', 'tags = "abc"'), "tags",
+     "must be a list of strings"),
+    # ranges
+    ("fov-180", GOOD.replace("fov_y = 34.0", "fov_y = 180"), "camera.fov_y", "(0, 180)"),
+    ("fov-nan", GOOD.replace("fov_y = 34.0", "fov_y = nan"), "camera.fov_y", "got nan"),
+    ("width-over-8192", GOOD.replace("width = 128", "width = 100000"), "camera.width", "[1, 8192]"),
+    ("negative-intensity", GOOD.replace("intensity = [12.0, 12.0, 12.0]", "intensity = [12.0, -1.0, 12.0]"),
+     "lights[0].intensity[1]", ">= 0"),
+    ("resolution-two", GOOD.replace("resolution = [16, 16, 16]", "resolution = [16, 16]"), "medium.resolution",
+     "3 integers"),
+    ("subdivisions-9", GOOD.replace("subdivisions = 4", "subdivisions = 9"), "mesh.subdivisions", "[1, 6]"),
+    ("eta-below-one", GOOD.replace('kind = "index-matched"', 'kind = "dielectric"\neta = 0.5'), "boundary.eta",
+     "(1, 3]"),
+    ("units-empty", GOOD.replace('units = "cm"', 'units = ""'), "units", "must not be empty"),
+    ("negative-sigma-t", GOOD.replace("value = [8.0, 8.0, 8.0]", "value = [8.0, -1.0, 8.0]"), "medium.sigma_t",
+     "outside [0.0, inf]"),
+    ("albedo-above-one", GOOD.replace("[0.99, 0.99, 0.99]", "[1.2, 0.99, 0.99]"), "medium.albedo",
+     "outside [0.0, 1.0]"),
+    ("negative-seed", JADE.replace("seed = 7", "seed = -1", 1), "medium.sigma_t.seed", "[0, 4294967295]"),
+    # kinds and missing tables
+    ("mesh-kind", GOOD.replace('kind = "sphere"', 'kind = "cube"'), "mesh.kind", "unknown kind 'cube'"),
+    ("boundary-kind", GOOD.replace('kind = "index-matched"', 'kind = "mirror"'), "boundary.kind", "mirror"),
+    ("field-kind", GOOD.replace('g = {kind = "constant"', 'g = {kind = "perlin"'), "medium.g.kind", "perlin"),
+    ("medium-missing", GOOD[:GOOD.index("[medium]")], "medium", "is missing"),
+    ("units-missing", GOOD.replace('units = "cm"\n', ""), "units", "is missing"),
+    # derived checks (model validators) and their messages
+    ("direction-zero", JADE.replace("direction = [1.0, 0.6, 0.3]", "direction = [0, 0, 0]", 1),
+     "medium.sigma_t.direction", "its length is 0"),
+    ("up-parallel", GOOD.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.3, 4.2]"), "camera.up", "parallel"),
+    ("box-too-small", GOOD.replace("bbox_min = [-1.05, -1.05, -1.05]", "bbox_min = [-0.9, -0.9, -0.9]").replace(
+        "bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [0.9, 0.9, 0.9]"), "medium.bbox_min/bbox_max",
+     "does not enclose the mesh"),
+    ("box-not-cube", GOOD.replace("bbox_max = [1.05, 1.05, 1.05]", "bbox_max = [1.05, 1.05, 2.05]"),
+     "medium.bbox_max", "not a cube"),
+    ("camera-inside", GOOD.replace("origin = [0.0, 0.3, 4.2]", "origin = [0.0, 0.3, 0.2]"), "camera.origin",
+     "inside the mesh"),
+    ("light-inside", GOOD.replace("position = [2.5, 1.8, 2.2]", "position = [0.1, 0.1, 0.1]"),
+     "lights[0].position", "inside the mesh"),
+    ("torus-radii", GOOD.replace(SPHERE_MESH, 'kind = "torus"\nmajor_radius = 0.3\nminor_radius = 0.5'),
+     "mesh.minor_radius", "smaller than major_radius"),
+]
+
+
+@pytest.mark.parametrize("text,field,words", [c[1:] for c in SCENE_CASES], ids=[c[0] for c in SCENE_CASES])
+def test_bad_scene(cli, tmp_path, text, field, words):
+    folder = scene_dir(tmp_path, text)
+    cli(["render", folder, "--out", tmp_path / "o"], folder / "scene.toml", f": {field}: ", words)
+
+
+FILE_CASES = [
+    # (id, mesh table, files, expected field, expected words)
+    ("nan-vertex", FILE_MESH, {"m.ply": lambda p: cube_ply(p, nan=True)}, "mesh.path", "NaN or infinite"),
+    ("folder-as-mesh", 'kind = "file"\npath = "meshes"', {"meshes": lambda p: p.mkdir()}, "mesh.path",
+     "is a folder"),
+    ("missing-mesh", FILE_MESH, {}, "mesh.path", "does not exist"),
+    ("mesh-leaves-folder", 'kind = "file"\npath = "../m.ply"', {}, "mesh.path", "leaves the scene folder"),
+    ("not-a-mesh", FILE_MESH, {"m.ply": lambda p: p.write_text("hello\n")}, "mesh.path", "cannot read m.ply"),
+    ("open-mesh", FILE_MESH, {"m.ply": lambda p: ply(p, [[-.5, -.5, 0], [.5, -.5, 0], [0, .5, 0]], [(0, 1, 2)])},
+     "mesh", "add repair = \"close-holes\""),
+    ("repair-on-a-sphere", SPHERE_MESH + '\nrepair = "close-holes"', {}, "mesh.repair", "not a known field"),
+    ("repair-unknown", FILE_MESH + '\nrepair = "fill"', {"m.ply": cube_ply}, "mesh.repair", '"close-holes"'),
+]
+
+
+@pytest.mark.parametrize("mesh,files,field,words", [c[1:] for c in FILE_CASES], ids=[c[0] for c in FILE_CASES])
+def test_bad_mesh_file(cli, tmp_path, mesh, files, field, words):
+    text = GOOD.replace(SPHERE_MESH, mesh).replace("bbox_min = [-1.05, -1.05, -1.05]", "bbox_min = [-1.5, -1.5, "
+                                                                                       "-1.5]")
+    folder = scene_dir(tmp_path, text, files)
+    cli(["render", folder, "--out", tmp_path / "o"], folder / "scene.toml", f": {field}", words)
+
+
+def test_scene_not_utf8(cli, tmp_path):
+    folder = scene_dir(tmp_path, GOOD.replace("Homogeneous", "Homog\xe9neous").encode("latin-1"))
+    cli(["render", folder, "--out", tmp_path / "o"], folder / "scene.toml", "file: is not UTF-8")
+
+
+def test_npz_bad_key_and_shape(cli, tmp_path):
+    npz = GOOD.replace('sigma_t = {kind = "constant", value = [8.0, 8.0, 8.0]}',
+                       'sigma_t = {kind = "npz", file = "s.npz", key = "sigma"}')
+    folder = scene_dir(tmp_path, npz, {"s.npz": lambda p: np.savez(p, data=np.ones((16, 16, 16)))})
+    cli(["render", folder, "--out", tmp_path / "o"], "medium.sigma_t.key", "has no array 'sigma'")
+    (folder / "s.npz").unlink()
+    np.savez(folder / "s.npz", sigma=np.ones((8, 8, 8)))
+    cli(["render", folder, "--out", tmp_path / "o"], "medium.sigma_t.file", "shape (8, 8, 8, 3)")
+
+
+# --------------------------------------------------------------------------- command-line values
+
+@pytest.fixture
+def store(tmp_path):
+    """A small real store: one sweep run with two configurations of one scene."""
+    path = tmp_path / "runs" / "store.sqlite"
+    with Store(path) as st:
+        rid = st.start_run("sweep", {"scenes": ["thin_ring"]})
+        for n in (8, 16):
+            st.record_config(rid, "thin_ring", "h" * 64, {"N": n, "steps": 4}, "ok", timings={"total": 1.0},
+                             metrics=[{"image": "subsurface", "metric": "relmse", "value": 0.1, "noise_floor": 0.01}])
+        st.finish_run(rid, "finished")
+    return path
+
+
+CLI_CASES = [
+    ("workers-0", SWEEP + ["--workers", "0"], "--workers: workers: must be an integer > 0"),
+    ("spp-0", ["reference", "sphere_homogeneous", "--spp", "0"], "--spp: spp: must be an integer > 0"),
+    ("size-huge", SWEEP[:-2] + ["--out", "o", "--size", "100000x100000"], "--size: size: 100000x100000 is larger than 8192x8192"),
+    ("size-not-wxh", SWEEP[:-2] + ["--out", "o", "--size", "64"], "--size: size: '64' is not WIDTHxHEIGHT"),
+    ("scheduler-garbage", SWEEP + ["--out", "o", "--scheduler", "not an address!"], "--scheduler: scheduler: 'not an address!' "
+                                                                      "is not a Dask scheduler address"),
+    ("grid-word", ["sweep", "--out", "o", "--scenes", "thin_ring", "--grid", "sixteen"], "--grid: grid: 'sixteen' is not an integer"),
+    ("grid-range", ["sweep", "--out", "o", "--scenes", "thin_ring", "--grid", "1000"], "--grid: N: must be an integer in [4, 256]"),
+    ("mapping-unknown", ["sweep", "--out", "o", "--scenes", "thin_ring", "--mapping", "magic"], "--mapping: mapping: unknown"),
+    ("scene-unknown", ["sweep", "--out", "o", "--scenes", "no_such_scene"], "--scenes: scenes: unknown scene 'no_such_scene'"),
+    ("option-unknown", SWEEP + ["--bogus"], "--bogus: bogus: is not an option of `sslpv-harness sweep`"),
+    ("out-required", ["render", "thin_ring"], "--out: out: is required"),
+    ("command-unknown", ["frobnicate"], "sslpv-harness: command: unknown command 'frobnicate'"),
+    ("target-nan", ["reference", "thin_ring", "--target", "nan"], "--target: target: must be a relative standard"),
+    ("date-bad", ["nightly", "--date", "2026-13-45", "--out", "n", "--store", "n.sqlite"], "--date: date:"),
+    ("budget-nan", ["report", "{store}", "--out", "r", "--budget-ms", "nan"], "--budget-ms: budget_ms: must be a "
+                                                                             "finite number > 0, got 'nan'"),
+    ("budget-negative", ["report", "{store}", "--out", "r", "--budget-ms", "-5"], "--budget-ms: budget_ms:"),
+    ("export-run-999", ["export", "{store}", "--out", "x.csv", "--run", "999"], "run_id: run 999 does not exist; "
+                                                                                "pick one of 1"),
+    ("export-scene-nosuch", ["export", "{store}", "--out", "x.csv", "--scene", "nosuch"], "scene: no configuration "
+                                                                                         "is of scene 'nosuch'"),
+    ("export-format", ["export", "{store}", "--out", "x.txt"], "x.txt: format: unknown extension '.txt'"),
+    ("report-run-999", ["report", "{store}", "--out", "r", "--run", "999"], "run_id: run 999 does not exist"),
+    ("out-is-a-file", SWEEP + ["--out", "afile.txt"], "afile.txt: output: exists and is not a folder"),
+    ("out-in-proc", SWEEP + ["--out", "/proc/sslpv/out"], "/proc/sslpv/out: output: /proc"),
+    ("out-under-a-file", ["export", "{store}", "--out", "afile.txt/x.csv"], "output: cannot be created: "),
+    ("config-and-flags", ["sweep", "--config", "s.json", "--grid", "8"], "--grid: grid: cannot be combined with "
+                                                                          "--config"),
+]
+
+
+@pytest.mark.parametrize("argv,needle", [c[1:] for c in CLI_CASES], ids=[c[0] for c in CLI_CASES])
+def test_bad_cli_value(cli, tmp_path, store, argv, needle):
+    (tmp_path / "afile.txt").write_text("a user's file\n")
+    argv = [str(store) if a == "{store}" else a for a in argv]
+    cli(argv, needle)
+
+
+def test_usage_errors_are_one_line_in_a_fresh_process(tmp_path):
+    """argparse's own exit path (not main's) gives one line too: what a shell user sees."""
+    for argv in (SWEEP + ["--workers", "0"], ["reference", "thin_ring", "--spp", "0"]):
+        proc = subprocess.run([sys.executable, "-m", "harness.cli", *argv], cwd=tmp_path, capture_output=True,
+                              text=True, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}, timeout=120)
+        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert proc.stderr.startswith("error: --") and "must be an integer > 0" in proc.stderr
+
+
+# --------------------------------------------------------------------------- outputs that are not ours
+
+def test_sweep_refuses_a_users_folder_and_keeps_its_sweep_json(cli, tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "sweep.json").write_text('{"my": "own notes"}\n')
+    (mine / "notes.txt").write_text("precious\n")
+    cli(SWEEP + ["--out", mine], mine, "output: is a non-empty folder that is not a sweep's")
+    assert (mine / "sweep.json").read_text() == '{"my": "own notes"}\n'
+
+
+def test_render_and_report_refuse_a_users_folder(cli, tmp_path, store):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("precious\n")
+    cli(["render", "thin_ring", "--out", mine], mine, "output: is a non-empty folder that the harness did not write")
+    cli(["report", store, "--out", mine], mine, "output: is a non-empty folder that the harness did not write")
+
+
+def test_nightly_refuses_a_users_folder(cli, tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "index.html").write_text("<p>my page</p>\n")
+    cli(["nightly", "--out", mine, "--store", tmp_path / "n.sqlite"], mine, "is a non-empty folder that is not "
+                                                                            "the nightly's reports folder")
+
+
+@pytest.fixture
+def readonly(tmp_path):
+    """A folder this process cannot create files in (chmod 555; chattr +i when running as root)."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    (folder / "existing.txt").write_text("x\n")
+    folder.chmod(0o555)
+    undo = [lambda: folder.chmod(0o755)]
+    try:
+        (folder / "probe").touch()
+        (folder / "probe").unlink()
+        if subprocess.run(["chattr", "+i", str(folder)], capture_output=True).returncode == 0:
+            undo.insert(0, lambda: subprocess.run(["chattr", "-i", str(folder)], check=True))
+        else:
+            pytest.skip("no way to make a read-only folder here (root without chattr)")
+        try:
+            (folder / "probe").touch()
+            pytest.skip("the folder is still writable")
+        except OSError:
+            pass
+    except OSError:
+        pass
+    yield folder
+    for step in undo:
+        step()
+
+
+def test_outputs_in_a_readonly_folder(cli, tmp_path, store, readonly):
+    cli(SWEEP + ["--out", readonly / "out"], readonly / "out", "output:", "is not writable")
+    cli(["export", store, "--out", readonly / "x.csv"], readonly / "x.csv", "output:", "is not writable")
+    cli(["report", store, "--out", readonly / "site"], readonly / "site", "output:", "is not writable")
+    cli(["render", "thin_ring", "--out", readonly / "r"], readonly / "r", "output:", "is not writable")
+    cli(SWEEP + ["--out", tmp_path / "s", "--store", readonly / "s.sqlite"], readonly / "s.sqlite",
+        "is not writable")
+
+
+# --------------------------------------------------------------------------- sweep configurations (--config)
+
+def write_config(tmp_path, **change):
+    data = {"scenes": ["thin_ring"], "params": {"N": [8], "steps": [4]}, "out": str(tmp_path / "s"), "store": "",
+            "size": [64, 64], "kind": "sweep", "reference_target": None}
+    data.update(change)
+    path = tmp_path / "sweep.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+CONFIG_CASES = [
+    ("scenes-5", {"scenes": 5}, "scenes: must be a non-empty list of non-empty strings, got 5"),
+    ("unknown-key", {"grid": [8]}, "grid: is not a known field"),
+    ("param-type", {"params": {"N": ["x"]}}, 'params.N[0]: must be an integer, got "x"'),
+    ("param-unknown", {"params": {"M": [8]}}, "params.M: is not a known field"),
+    ("param-range", {"params": {"N": [1000]}}, "params.N: must be an integer in [4, 256]"),
+    ("size-huge", {"size": [100000, 64]}, "size[0]: must be an integer in [1, 8192]"),
+    ("scene-unknown", {"scenes": ["nosuch"]}, "scenes[0]: unknown scene 'nosuch'"),
+    ("target-range", {"reference_target": 2.0}, "reference_target: must be a number in (0, 1)"),
+]
+
+
+@pytest.mark.parametrize("change,needle", [c[1:] for c in CONFIG_CASES], ids=[c[0] for c in CONFIG_CASES])
+def test_bad_sweep_config(cli, tmp_path, change, needle):
+    path = write_config(tmp_path, **change)
+    cli(["sweep", "--config", path], path, needle)
+
+
+def test_sweep_config_not_json_and_missing(cli, tmp_path):
+    path = tmp_path / "sweep.json"
+    path.write_text("{not json")
+    cli(["sweep", "--config", path], path, "json: is not valid JSON")
+    cli(["sweep", "--config", tmp_path / "none.json"], "none.json: file: does not exist")
+
+
+# --------------------------------------------------------------------------- matrices
+
+MATRIX = """scenes = ["thin_ring"]
+size = [64, 64]
+[params]
+grid = [8]
+steps = [4]
+mapping = ["collision"]
+[tolerance]
+rel = 0.05
+abs = 1e-4
+"""
+
+MATRIX_CASES = [
+    ("size-one", MATRIX.replace("size = [64, 64]", "size = [64]"), "size: must be a list of 2 integers"),
+    ("tolerance-string", 'tolerance = "loose"\n' + MATRIX.replace("[tolerance]\nrel = 0.05\nabs = 1e-4\n", ""),
+     'tolerance: must be a table, got "loose"'),
+    ("scenes-5", MATRIX.replace('scenes = ["thin_ring"]', "scenes = 5"), 'scenes: must be one of "all" or a non-empty list'),
+    ("param-unknown", MATRIX.replace("grid = [8]", "colour = [1]"), "params.colour: is not a known field"),
+    ("param-range", MATRIX.replace("grid = [8]", "grid = [1000]"), "params.grid: must be an integer in [4, 256]"),
+    ("also-unknown", MATRIX + "[[also]]\ngridd = [8]\n", "also[0].gridd: is not a known field"),
+    ("scene-unknown", MATRIX.replace('"thin_ring"', '"nosuch"'), "scenes[0]: unknown scene 'nosuch'"),
+    ("tolerance-negative", MATRIX.replace("rel = 0.05", "rel = -1"), "tolerance.rel: must be a number >= 0"),
+    ("not-toml", "scenes = [\n", "toml: is not valid TOML"),
+]
+
+
+@pytest.mark.parametrize("text,needle", [c[1:] for c in MATRIX_CASES], ids=[c[0] for c in MATRIX_CASES])
+def test_bad_nightly_matrix(cli, tmp_path, text, needle):
+    matrix = tmp_path / "m.toml"
+    matrix.write_text(text)
+    cli(["nightly", "--matrix", matrix, "--store", tmp_path / "n.sqlite", "--out", tmp_path / "n"], matrix, needle)
+
+
+ACCURACY = (REPO / "baselines" / "accuracy_matrix.toml").read_text()
+
+
+@pytest.mark.parametrize("text,needle", [
+    (re.sub(r"scenes = \[[^\]]*\]", "scenes = 5", ACCURACY), "scenes: must be a non-empty list of non-empty"),
+    (ACCURACY + "[tolerance.nosuch]\nrel = 0.1\n", "tolerance.nosuch: names no scene of the matrix"),
+    (ACCURACY.replace("rel = 0.03", 'rel = "loose"'), 'tolerance.default.rel: must be a number >= 0, got "loose"'),
+    (ACCURACY.replace("grid = [16, 32]", "grid = [16, 3200]"), "params.grid: must be an integer in [4, 256]"),
+], ids=["scenes-5", "tolerance-scene", "tolerance-type", "param-range"])
+def test_bad_accuracy_matrix(tmp_path, text, needle):
+    from harness.regression.baselines import load_matrix
+
+    path = tmp_path / "accuracy_matrix.toml"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        load_matrix(path)
+    assert "\n" not in str(info.value) and str(path) in str(info.value) and needle in str(info.value), info.value
+
+
+# --------------------------------------------------------------------------- stores
+
+def test_foreign_sqlite_is_refused_untouched(cli, tmp_path):
+    other = tmp_path / "music.sqlite"
+    db = sqlite3.connect(other)
+    db.execute("CREATE TABLE songs (title TEXT)")
+    db.execute("INSERT INTO songs VALUES ('a')")
+    db.commit()
+    db.close()
+    cli(["export", other, "--out", tmp_path / "x.csv"], other, "another program's SQLite database")
+    cli(["report", other, "--out", tmp_path / "r"], other, "another program's SQLite database")
+    cli(SWEEP + ["--out", tmp_path / "s", "--store", other], other, "another program's SQLite database")
+    with sqlite3.connect(other) as db:
+        assert db.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+        assert [r[0] for r in db.execute("SELECT name FROM sqlite_master")] == ["songs"]
+
+
+def test_corrupt_newer_and_folder_stores(cli, tmp_path, store):
+    text = tmp_path / "notes.sqlite"
+    text.write_text("not a database at all, but long enough to have a header of one hundred bytes ......\n" * 3)
+    cli(["export", text, "--out", tmp_path / "x.csv"], text, "file: is not an SQLite database")
+    db = sqlite3.connect(store)
+    db.execute("PRAGMA user_version = 99")
+    db.commit()
+    db.close()
+    cli(["export", store, "--out", tmp_path / "x.csv"], store, "schema: store schema v99 is newer")
+    cli(["report", tmp_path / "nothing", "--out", tmp_path / "r"], "nothing: store: does not exist")
+
+
+def test_corrupt_store_to_nightly_leaves_nothing(cli, tmp_path):
+    bad = tmp_path / "nightly.sqlite"
+    bad.write_text("garbage " * 40)
+    matrix = tmp_path / "m.toml"
+    matrix.write_text(MATRIX)
+    cli(["nightly", "--matrix", matrix, "--store", bad, "--out", tmp_path / "n", "--date", "2026-11-20"], bad,
+        "is not an SQLite database")
+    assert not (tmp_path / "n").exists()
+
+
+def test_store_in_a_readonly_folder_is_read(tmp_path, store, readonly):
+    """Reading needs no write: export and report open a store read-only (the issue: 'not an SQLite database')."""
+    import shutil
+
+    subprocess.run(["chattr", "-i", str(readonly)], capture_output=True)
+    readonly.chmod(0o755)
+    shutil.copy(store, readonly / "store.sqlite")
+    readonly.chmod(0o555)
+    subprocess.run(["chattr", "+i", str(readonly)], capture_output=True)
+    assert main(["export", str(readonly / "store.sqlite"), "--out", str(tmp_path / "x.csv"), "--json"]) == 0
+    assert len((tmp_path / "x.csv").read_text().splitlines()) == 3
+    with pytest.raises(InputError, match=r"store.sqlite: folder: .* is not writable, and a store writes its journal"):
+        Store(readonly / "store.sqlite")
+
+
+# --------------------------------------------------------------------------- EXRs
+
+def test_bad_exrs(cli, tmp_path):
+    img = np.ones((8, 8, 3), np.float32)
+    write_exr(tmp_path / "ref.exr", img)
+    write_exr(tmp_path / "small.exr", np.ones((4, 4, 3), np.float32))
+    nan = img.copy()
+    nan[2, 3, 1] = np.nan
+    write_exr(tmp_path / "nan.exr", nan)
+    (tmp_path / "text.exr").write_text("not an image\n")
+    cli(["compare", tmp_path / "ref.exr", tmp_path / "nan.exr"], "nan.exr: rgb: contains 1 NaN or Inf values")
+    cli(["compare", tmp_path / "ref.exr", tmp_path / "small.exr"], "small.exr: size: is 4x4")
+    cli(["compare", tmp_path / "ref.exr", tmp_path / "text.exr"], "text.exr: file: not a readable OpenEXR file")
+    cli(["compare", tmp_path / "ref.exr", tmp_path / "none.exr"], "none.exr: file: does not exist")
