@@ -290,7 +290,12 @@ def close_holes(vertices, faces):
     f0 = ms.current_mesh().face_number()
     passes, edges = 0, before["boundary_edges"]
     while edges > 0 and passes < _PASSES:
-        ms.meshing_close_holes(maxholesize=MAX_HOLE_EDGES, selfintersection=False)
+        try:
+            ms.meshing_close_holes(maxholesize=MAX_HOLE_EDGES, selfintersection=False)
+        except pymeshlab.PyMeshLabException as exc:   # e.g. non-manifold edges: nothing it can close
+            reason = " ".join(str(exc).split()).replace("Failed to apply filter: meshing_close_holes ", "")
+            raise FieldProblem((), f"is still not closed after repair = \"close-holes\" (MeshLab: {reason})",
+                               "repair the mesh in MeshLab or Blender, so inside and outside are defined") from None
         passes += 1
         now = ms.get_topological_measures()["boundary_edges"]
         if now >= edges:                            # no progress: what is left is not a closable hole
@@ -299,12 +304,21 @@ def close_holes(vertices, faces):
         edges = now
     v, f = _from_meshset(ms)
     after = ms.get_topological_measures()
-    return v, f, {"method": "close-holes", "tool": f"pymeshlab {pymeshlab.__version__} meshing_close_holes("
+    return v, f, {"method": "close-holes", "tool": f"pymeshlab {_version()} meshing_close_holes("
                   f"maxholesize={MAX_HOLE_EDGES}, selfintersection=False)", "passes": passes,
                   "boundary_edges_before": int(before["boundary_edges"]),
                   "holes_before": int(before["number_holes"]), "boundary_edges_after": int(after["boundary_edges"]),
                   "faces_added": int(len(f) - f0), "vertices_welded": int(welded),
                   "unreferenced_vertices_removed": int(unreferenced)}
+
+
+def _version():
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pymeshlab")
+    except PackageNotFoundError:
+        return "?"
 
 
 def signed_volume(mesh):
