@@ -14,7 +14,13 @@ option                 meaning
 =====================  ==============================================================
 
 The client renders (or fetches) references, scatters them to the workers, and is
-the only writer of files and of the store. Each finished configuration is
+the only writer of files and of the store. The output folder must be new, empty or a
+sweep's (a user's folder is refused), and it is locked while the sweep runs: a second
+sweep into it is refused with one line (``harness.io.outputs``). Every output is checked
+before the first file is written. Progress goes to stderr (``harness.progress``: one
+line per reference, then the configurations with done/total, the ETA and the failures),
+the summary to stdout; a run that ends ``incomplete`` makes the command exit 1 with one
+line that says how to resume it. Each finished configuration is
 committed to the store at once, so Ctrl-C, a killed worker (Dask re-runs its
 task elsewhere) or a crash loses nothing; running the same command again skips
 every configuration already recorded as ``ok`` and retries failed ones. A run is
