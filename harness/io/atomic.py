@@ -15,6 +15,9 @@ from harness.io.outputs import MARKER, check_replaceable, remove_leftovers, temp
 
 __all__ = ["atomic_write", "atomic_dir", "MARKER"]
 
+#: The folder rule's old name (``harness.calibration`` checks its ``--out`` with it).
+_check_replaceable = check_replaceable
+
 
 @contextlib.contextmanager
 def atomic_write(path):
