@@ -98,22 +98,22 @@ def _text(path, what, fix):
                          "save it as UTF-8") from exc
 
 
-def read_toml(path, what="a TOML file", fix="give the right file"):
-    """The table of a UTF-8 TOML file, or an InputError naming what is wrong with the file."""
+def _parsed(path, what, fix, loads, error, syntax):
     text = _text(path, what, fix)
     try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(path, "toml", f"is not valid TOML ({exc})", "fix the syntax") from exc
+        return loads(text)
+    except error as exc:
+        raise InputError(path, syntax.lower(), f"is not valid {syntax} ({exc})", "fix the syntax") from exc
+
+
+def read_toml(path, what="a TOML file", fix="give the right file"):
+    """The table of a UTF-8 TOML file, or an InputError naming what is wrong with the file."""
+    return _parsed(path, what, fix, tomllib.loads, tomllib.TOMLDecodeError, "TOML")
 
 
 def read_json(path, what="a JSON file", fix="give the right file"):
     """The object of a UTF-8 JSON file, or an InputError naming what is wrong with the file."""
-    text = _text(path, what, fix)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(path, "json", f"is not valid JSON ({exc})", "fix the syntax") from exc
+    return _parsed(path, what, fix, json.loads, json.JSONDecodeError, "JSON")
 
 
 # --------------------------------------------------------------------------- validation
