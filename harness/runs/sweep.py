@@ -419,12 +419,25 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                 if status != "finished":
                     summary["resume"] = f"sslpv-harness sweep --config {out / SWEEP_FILE}"
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        _close_cluster(client, cluster, progress)
     summary["wall_s"] = round(time.perf_counter() - t0, 2)
     return summary
+
+
+def _close_cluster(client, cluster, progress):
+    """Close the client and a LocalCluster. Everything is recorded by then: a worker that is
+    slow to stop (a loaded machine: the nanny's join times out) is said on stderr, not raised."""
+    from harness.progress import Progress
+
+    for thing in (client, cluster):
+        if thing is None:
+            continue
+        try:
+            thing.close()
+        except (TimeoutError, OSError, RuntimeError) as exc:
+            if progress:
+                Progress("sweep", None).log(f"the Dask {type(thing).__name__} did not close cleanly "
+                                            f"({type(exc).__name__}: {exc}); every result was recorded before")
 
 
 #: Seconds a sweep waits for a Dask worker when its cluster has none before it stops (incomplete).
