@@ -378,6 +378,8 @@ def _describe(path, items, syntax="toml"):
     if kind == "union_tag_not_found":
         tags = _union_tags(ann)
         return "is missing", f"add kind = one of: {tags}" if tags else "add kind"
+    if kind == "finite_number":                     # NaN or an infinity where a number belongs
+        return f"must be a finite number, got {_show(value)}", example or "give a finite number"
     if kind in _EXPECTED or kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         if len(items) > 1 and typing.get_origin(_strip(ann)[0]) in (typing.Union, types.UnionType):
             words = " or ".join(dict.fromkeys(_words(a) for a in typing.get_args(_strip(ann)[0])))
