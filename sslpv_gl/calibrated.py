@@ -32,7 +32,9 @@ there is no silent nearest-budget fallback. The fitted scales hold only for the
 renderer settings they were fitted with (``[settings]``, :data:`SETTINGS`): a render
 with another ``skip``, ``outside`` and so on is refused (:meth:`Calibrated.check_settings`),
 never silently given scales fitted for something else. Version 1 files, which had no
-``[settings]``, are refused with the fix. Every defect of the file is an
+``[settings]``, are refused with the fix. The file is a typed model
+(:class:`harness.validation.InputModel`): an unknown key, a wrong type or an out-of-range
+value is one line naming the file and the field. Every defect of the file is an
 :class:`~harness.errors.InputError` naming the file, the field and the fix.
 """
 
@@ -40,12 +42,15 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import Field, field_validator, model_validator
 
 from harness.errors import InputError
+from harness.validation import FieldProblem, InputModel, validate
 
 __all__ = ["FORMAT", "VERSION", "PREFIX", "SETTINGS", "Budget", "Calibrated", "load_calibrated", "parse_mapping",
            "resolve_path"]
@@ -133,85 +138,82 @@ def load_calibrated(path, families):
     return _parse(str(p), data, tuple(families))
 
 
+# ------------------------------------------------------------------ the file's typed model
+
+_FIX = "write it again with `sslpv-harness calibrate`"
+_Scale = Annotated[float, Field(ge=SCALE_RANGE[0], le=SCALE_RANGE[1], examples=[1.0])]
+_SE = Annotated[float, Field(ge=0.0, examples=[0.01])]
+
+
+class _Settings(InputModel):
+    skip: Annotated[int, Field(ge=0, le=1024, examples=[0])]
+    outside: Annotated[str, Field(examples=["vacuum"])]
+    resample: Annotated[str, Field(examples=["box"])]
+    lookup: Annotated[str, Field(examples=["cell"])]
+    inject_size: Annotated[int, Field(ge=4, le=4096, examples=[256])]
+    inject_offset: Annotated[float, Field(examples=[0.0])]
+    precision: Annotated[str, Field(examples=["fp32"])]
+    eta2: Annotated[bool, Field(examples=[False])]
+
+
+class _Budget(InputModel):
+    N: Annotated[int, Field(ge=4, le=256, examples=[32])]
+    steps: Annotated[int, Field(ge=0, le=1024)] | Literal["steady", "auto"] = Field(examples=[8])
+    sigma_scale: _Scale
+    radiance_scale: _Scale
+    sigma_scale_se: _SE | None = None
+    radiance_scale_se: _SE | None = None
+    loss: float | None = None
+    loss_held_out: float | None = None
+
+
+class _File(InputModel):
+    format: Literal[FORMAT]
+    version: Annotated[int, Field(examples=[VERSION])]
+    family: Annotated[str, Field(examples=["diffusion"])]
+    settings: _Settings
+    fit: dict = Field(default_factory=dict)
+    budget: Annotated[list[_Budget], Field(min_length=1)]
+
+    @field_validator("version")
+    @classmethod
+    def _version(cls, v):
+        if v != VERSION:
+            raise FieldProblem((), f"is {v}; this harness reads version {VERSION}", _FIX)
+        return v
+
+    @field_validator("family")
+    @classmethod
+    def _family(cls, v, info):
+        families = (info.context or {}).get("families", ())
+        if v not in families:
+            raise FieldProblem((), f"{v!r} is not a mapping family of this harness",
+                               f"use one of: {', '.join(families)}; {_FIX}")
+        return v
+
+    @model_validator(mode="after")
+    def _unique(self):
+        seen = set()
+        for i, b in enumerate(self.budget):
+            if (b.N, b.steps) in seen:
+                raise FieldProblem(("budget", i), f"budget N={b.N} steps={b.steps} appears twice", _FIX)
+            seen.add((b.N, b.steps))
+        return self
+
+
 @functools.lru_cache(maxsize=32)
 def _parse(path, data, families):
     sha = hashlib.sha256(data).hexdigest()
-    fix = "write it again with `sslpv-harness calibrate`"
     try:
         doc = tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise InputError(path, "toml", f"is not valid UTF-8 TOML ({str(exc).splitlines()[0]})", fix) from None
-    if doc.get("format") != FORMAT:
-        raise InputError(path, "format", f"is {doc.get('format')!r}, not {FORMAT!r}", fix)
-    if doc.get("version") != VERSION:
-        raise InputError(path, "version", f"is {doc.get('version')!r}; this harness reads version {VERSION}", fix)
-    family = doc.get("family")
-    if family not in families:
-        raise InputError(path, "family", f"{family!r} is not a mapping family of this harness",
-                         f"use one of: {', '.join(families)}; {fix}")
-    unknown = set(doc) - {"format", "version", "family", "fit", "budget", "settings"}
-    if unknown:
-        raise InputError(path, sorted(unknown)[0], "is not a field of a calibrated mapping", fix)
-    raw = doc.get("budget")
-    if not isinstance(raw, list) or not raw:
-        raise InputError(path, "budget", "has no [[budget]] table", fix)
-    budgets, seen = [], set()
-    for i, b in enumerate(raw):
-        where = f"budget[{i}]"
-        if not isinstance(b, dict):
-            raise InputError(path, where, "is not a table", fix)
-        extra = set(b) - {"N", "steps", "sigma_scale", "radiance_scale", "sigma_scale_se", "radiance_scale_se",
-                          "loss", "loss_held_out"}
-        if extra:
-            raise InputError(path, f"{where}.{sorted(extra)[0]}", "is not a field of a budget", fix)
-        N, steps = b.get("N"), b.get("steps")
-        if isinstance(N, bool) or not isinstance(N, int) or not 4 <= N <= 256:
-            raise InputError(path, f"{where}.N", f"is {N!r}; must be an integer in [4, 256]", fix)
-        if not ((isinstance(steps, int) and not isinstance(steps, bool) and 0 <= steps <= 1024)
-                or steps in ("steady", "auto")):
-            raise InputError(path, f"{where}.steps", f"is {steps!r}; must be an integer in [0, 1024], "
-                             "'auto' or 'steady'", fix)
-        vals = {}
-        for name in ("sigma_scale", "radiance_scale"):
-            v = b.get(name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                    or not SCALE_RANGE[0] <= v <= SCALE_RANGE[1]:
-                raise InputError(path, f"{where}.{name}", f"is {v!r}; must be a number in "
-                                 f"[{SCALE_RANGE[0]:g}, {SCALE_RANGE[1]:g}]", fix)
-            vals[name] = float(v)
-        for name in ("sigma_scale_se", "radiance_scale_se"):
-            v = b.get(name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0):
-                raise InputError(path, f"{where}.{name}", f"is {v!r}; must be a number >= 0", fix)
-            vals[name] = None if v is None else float(v)
-        if (N, steps) in seen:
-            raise InputError(path, where, f"budget N={N} steps={steps} appears twice", fix)
-        seen.add((N, steps))
-        budgets.append(Budget(N=N, steps=steps, **vals))
-    fit = doc.get("fit", {})
-    if not isinstance(fit, dict):
-        raise InputError(path, "fit", "is not a table", fix)
-    return Calibrated(path=path, sha256=sha, family=family, budgets=tuple(budgets), fit=fit,
-                      settings=_settings(path, doc.get("settings"), fix))
-
-
-def _settings(path, raw, fix):
-    """The ``[settings]`` table: every key of :data:`SETTINGS`, each of its type."""
-    if not isinstance(raw, dict):
-        raise InputError(path, "settings", "is missing or not a table", fix)
-    extra = set(raw) - set(SETTINGS)
-    if extra:
-        raise InputError(path, f"settings.{sorted(extra)[0]}", "is not a renderer setting of a calibration", fix)
-    out = {}
-    for name, kind in SETTINGS.items():
-        if name not in raw:
-            raise InputError(path, f"settings.{name}", "is missing", fix)
-        v = raw[name]
-        ok = isinstance(v, bool) if kind is bool else (
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) if kind is float else
-            isinstance(v, kind) and not isinstance(v, bool))
-        if not ok:
-            raise InputError(path, f"settings.{name}", f"is {v!r}; must be a{'n' if kind is int else ''} "
-                             f"{kind.__name__}", fix)
-        out[name] = float(v) if kind is float else v
-    return out
+        raise InputError(path, "toml", f"is not valid UTF-8 TOML ({str(exc).splitlines()[0]})", _FIX) from None
+    f = validate(_File, doc, path, context={"families": families})
+    budgets = tuple(Budget(N=b.N, steps=b.steps, sigma_scale=float(b.sigma_scale),
+                           radiance_scale=float(b.radiance_scale),
+                           sigma_scale_se=None if b.sigma_scale_se is None else float(b.sigma_scale_se),
+                           radiance_scale_se=None if b.radiance_scale_se is None else float(b.radiance_scale_se))
+                    for b in f.budget)
+    settings = f.settings.model_dump()
+    settings["inject_offset"] = float(settings["inject_offset"])
+    return Calibrated(path=path, sha256=sha, family=f.family, budgets=budgets, fit=f.fit, settings=settings)

@@ -92,7 +92,7 @@ def test_bad_file_is_one_line(tmp_path, text, field):
     with pytest.raises(InputError) as exc:
         load_calibrated(p, FAMILIES)
     msg = str(exc.value)
-    assert "\n" not in msg and msg.startswith(f"{p}: {field}:") and "calibrate" in msg
+    assert "\n" not in msg and msg.startswith(f"{p}: {field}:") and "; " in msg, msg
 
 
 def test_missing_file(tmp_path):
