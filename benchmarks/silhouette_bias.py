@@ -27,7 +27,7 @@ import numpy as np
 
 from harness.metrics import compute
 from harness.metrics.coverage import comparison_mask
-from harness.regression.accuracy import cases, load_case_reference, small_scene
+from harness.regression.accuracy import cases, case_reference, small_scene
 from sslpv_gl.renderer import SSLPVRenderer
 
 
@@ -59,7 +59,7 @@ def main():
     rows = {}
     for scene_name, params, _ in cases():
         scene = small_scene(scene_name)
-        ref, _ = load_case_reference(scene)
+        ref = case_reference(scene)
         cov = ref["coverage"]
         old, new = cov > 0.5, comparison_mask(cov)
         partial = old & ~new
