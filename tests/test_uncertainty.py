@@ -45,22 +45,26 @@ def _noisy_reference(rng, truth, sigma, rho, k=8):
     return seeds.mean(0), seeds.std(0, ddof=1) / np.sqrt(k)
 
 
+def _over_references(seed, name, rho, n, **kw):
+    """``(Delta, result)`` of ``name`` for one pair of test images against ``n`` independently noisy references."""
+    rng = np.random.default_rng(seed)
+    truth, old, new, m = _images(rng, (12, 12))
+    sigma = 0.05 * truth * np.sqrt(8)          # per-seed noise; the mean's SE is 5 % of the truth
+    out = []
+    for i in range(n):
+        y, se = _noisy_reference(rng, truth, sigma, rho)
+        out.append((paired_difference(name, new, old, y, se, m, seed=i, **kw), y, se, new, old, m))
+    return out
+
+
 @pytest.mark.parametrize("name", ["relmse", "si_relmse", "energy_ratio"])
 @pytest.mark.parametrize("rho", [0.0, 1.0])
 def test_delta_method_se_matches_the_spread_over_references(name, rho):
     """SE within 15 % of the true spread where the channels are fully correlated, and never
     below it by more than sampling error (the bound is conservative for any correlation)."""
-    rng = np.random.default_rng(11)
-    truth, old, new, m = _images(rng, (12, 12))
-    sigma = 0.05 * truth * np.sqrt(8)          # per-seed noise; the mean's SE is 5 % of the truth
-    deltas, ses = [], []
-    for _ in range(250):
-        y, se = _noisy_reference(rng, truth, sigma, rho)
-        d = paired_difference(name, new, old, y, se, m, k=8)
-        deltas.append(d.delta)
-        ses.append(d.se)
-        assert d.method == "delta" and np.isfinite(d.dof) and d.dof > 7
-    spread, se = float(np.std(deltas, ddof=1)), float(np.mean(ses))
+    runs = _over_references(11, name, rho, 250, k=8)
+    assert all(d.method == "delta" and np.isfinite(d.dof) and d.dof > 7 for d, *_ in runs)
+    spread, se = float(np.std([d.delta for d, *_ in runs], ddof=1)), float(np.mean([d.se for d, *_ in runs]))
     print(f"{name} rho={rho}: spread of Delta {spread:.4g}, mean SE {se:.4g}, ratio {se / spread:.3f}")
     # 250 references: the spread is known to about +-4.5 % (1 sigma)
     assert se >= 0.88 * spread, f"{name}: SE {se:.4g} underestimates the spread {spread:.4g}"
@@ -70,31 +74,17 @@ def test_delta_method_se_matches_the_spread_over_references(name, rho):
 
 def test_independent_channel_formula_would_underestimate():
     """The power of the test above: with correlated channels, sum_c g^2 se^2 is too small."""
-    rng = np.random.default_rng(12)
-    truth, old, new, m = _images(rng, (12, 12))
-    sigma = 0.05 * truth * np.sqrt(8)
-    deltas, naive = [], []
-    for _ in range(100):
-        y, se = _noisy_reference(rng, truth, sigma, 1.0)
-        d = paired_difference("relmse", new, old, y, se, m)
-        deltas.append(d.delta)
-        g = GRADIENTS["relmse"](new, y, m) - GRADIENTS["relmse"](old, y, m)
-        naive.append(np.sqrt(((g * se) ** 2)[m].sum()))
-    assert np.mean(naive) < 0.7 * np.std(deltas, ddof=1)
+    runs = _over_references(12, "relmse", 1.0, 100)
+    naive = [np.sqrt((((GRADIENTS["relmse"](new, y, m) - GRADIENTS["relmse"](old, y, m)) * se) ** 2)[m].sum())
+             for _, y, se, new, old, m in runs]
+    assert np.mean(naive) < 0.7 * np.std([d.delta for d, *_ in runs], ddof=1)
 
 
 def test_resampling_se_matches_the_spread_for_flip():
-    rng = np.random.default_rng(5)
-    truth, old, new, m = _images(rng, (12, 12))
-    sigma = 0.05 * truth * np.sqrt(8)
-    deltas, ses = [], []
-    for i in range(30):
-        y, se = _noisy_reference(rng, truth, sigma, 1.0)
-        d = paired_difference("flip", new, old, y, se, m, draws=12, seed=i)
-        deltas.append(d.delta)
-        ses.append(d.se)
-        assert d.method == "resampling" and d.dof == 11
-    spread, se = float(np.std(deltas, ddof=1)), float(np.sqrt(np.mean(np.square(ses))))
+    runs = _over_references(5, "flip", 1.0, 30, draws=12)
+    assert all(d.method == "resampling" and d.dof == 11 for d, *_ in runs)
+    spread = float(np.std([d.delta for d, *_ in runs], ddof=1))
+    se = float(np.sqrt(np.mean([d.se ** 2 for d, *_ in runs])))
     print(f"flip: spread of Delta {spread:.4g}, rms SE {se:.4g}, ratio {se / spread:.3f}")
     # 30 references: the spread itself is known to about +-13 % (1 sigma)
     assert 0.65 * spread <= se <= 1.45 * spread
