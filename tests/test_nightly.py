@@ -117,3 +117,40 @@ def test_matrix_also_products(tmp_path):
     m.write_text('[params]\ngrid = [8]\n[[also]]\ngridd = [8]\n')
     with pytest.raises(InputError, match=r"also\[0\]\.gridd: is not a renderer parameter"):
         load_matrix(m)
+
+
+def test_judge_night_notes_renderer_scene_and_missing_renders(tmp_path):
+    """The night's pairs without rendering: another GL renderer and a changed scene give one line each."""
+    from harness.io.images import write_exr
+    from harness.reference.committed import committed_reference
+    from harness.regression.accuracy import small_scene
+    from harness.regression.nightly import judge_night
+    from harness.store import Store
+    from sslpv_gl.params import SSLPVParams
+
+    scene = small_scene("thin_ring")
+    img = np.full((64, 64, 3), 0.2, np.float32)
+    mask = np.ones((64, 64), np.float32)
+
+    def render_dir(name):
+        d = tmp_path / name
+        d.mkdir()
+        for part in ("subsurface", "full"):
+            write_exr(d / f"{part}.exr", img, extra={"mask": mask})
+        return str(d)
+
+    p8, p4 = SSLPVParams(N=8, steps=8).as_dict(), SSLPVParams(N=4, steps=8).as_dict()
+    with Store(tmp_path / "s.sqlite") as st:
+        prev = st.start_run("nightly", {}, gl_renderer="GL one")
+        st.record_config(prev, "thin_ring", scene.content_hash, p8, "ok", render_dir=render_dir("a"))
+        st.record_config(prev, "thin_ring", "f" * 64, p4, "ok", render_dir=render_dir("b"))
+        now = st.start_run("nightly", {}, gl_renderer="GL two")
+        st.record_config(now, "thin_ring", scene.content_hash, p8, "ok", render_dir=render_dir("c"))
+        st.record_config(now, "thin_ring", scene.content_hash, p4, "ok", render_dir=render_dir("d"))
+        res = judge_night(st, now, prev, {"thin_ring": committed_reference(scene)}, ["thin_ring"], [64, 64],
+                          {"rel": 0.05, "abs": 1e-4})
+    assert res["changes"] == [] and [r["changed"] for r in res["images"]] == [False]
+    assert res["family"] == 4                     # one pair (subsurface = full), four headline metrics
+    assert any("'GL one', tonight with 'GL two'" in n for n in res["notes"])
+    assert any("N4-K8-collision: the scene changed since the previous night (hash ffffffffffff" in n
+               for n in res["notes"])
