@@ -66,6 +66,14 @@ def _material(renderer, change):
         renderer.lpv_material = original
 
 
+def _rebuild(renderer):
+    """Forget every program and the vertex arrays bound to them (a vertex array renders with the
+    program it was made for), so that the next render compiles the shaders as they are now."""
+    renderer._programs.clear()
+    renderer._points = None
+    renderer._meshes.clear()
+
+
 @contextlib.contextmanager
 def _shader_edit(renderer, edits):
     """Replace text in the shader sources (each edit must apply), rebuilding every program."""
@@ -83,12 +91,12 @@ def _shader_edit(renderer, edits):
         return text
 
     shaders.load_source = edited
-    renderer._programs.clear()
+    _rebuild(renderer)
     try:
         yield hits
     finally:
         shaders.load_source = original
-        renderer._programs.clear()
+        _rebuild(renderer)
 
 
 @contextlib.contextmanager
@@ -97,12 +105,12 @@ def _transposed(renderer):
 
     original = propagate.propagation_matrices
     propagate.propagation_matrices = lambda: np.ascontiguousarray(np.swapaxes(original(), -1, -2))
-    renderer._programs.clear()
+    _rebuild(renderer)
     try:
         yield
     finally:
         propagate.propagation_matrices = original
-        renderer._programs.clear()
+        _rebuild(renderer)
 
 
 CELL = "floor((p.xyz - u_offset * n - u_bbox_min) / u_dx)"
@@ -239,6 +247,12 @@ def main():
                 rows.append(row)
         if hasattr(hits, "values") and not all(hits.values()):
             raise SystemExit(f"{name}: a shader edit did not apply ({hits}); the benchmark would test nothing")
+        # the error is gone again: a clean render equals its committed image
+        scene, params, _ = all_cases[0]
+        res = renderer.render(small_scene(scene), params)
+        if image_change(res.subsurface, *committed[(scene, config_label(params))][:1], res.mask,
+                        committed[(scene, config_label(params))][1]).changed:
+            raise SystemExit(f"{name}: the renderer did not return to its committed images after the error")
         t = max(counts["touched"], 1)
         below = [r["image"] for r in rows if r["error"] == name and r["touched"] and not r["changed"]]
         print(f"{name}: touches {counts['touched']} of {counts['cases']} cases (any bit); flagged changed in "
