@@ -197,7 +197,7 @@ def main():
           f"{fa_changed} images changed, {fa_flagged} regression or improvement", flush=True)
 
     # ---------------- the six errors
-    rows, calib = [], {"delta": [], "flip": []}
+    rows, calib, spread = [], {"delta": [], "flip": []}, {}
     for name in errors:
         counts = {"cases": 0, "touched": 0, "changed": 0, "regression": 0, "improvement": 0, "checked": 0,
                   "wrong": 0}
@@ -244,6 +244,7 @@ def main():
                                     z = (a.delta - b.delta) / max(np.hypot(a.se, b.se), 1e-300)
                                     calib["flip" if a.metric == "flip" else "delta"].append(
                                         (z, a.critical, name, scene, label, a.metric))
+                                    spread.setdefault((scene, name, label, a.metric), []).append((a.delta, a.se))
                 rows.append(row)
         if hasattr(hits, "values") and not all(hits.values()):
             raise SystemExit(f"{name}: a shader edit did not apply ({hits}); the benchmark would test nothing")
@@ -273,6 +274,14 @@ def main():
               f"{len(z)} leave-one-out comparisons, std of z {z.std():.3f}, |z| > 1.96 in "
               f"{np.mean(np.abs(z) > 1.96):.2%} (5% promised), beyond the run's critical value in {beyond} "
               f"(promised rate {ALPHA / m:.1e} per comparison: {ALPHA / m * len(z):.3f} expected)")
+    # the SEs against the spread of Delta over the independent references, per scene
+    by_scene = {}
+    for (scene, _, _, metric), v in spread.items():
+        d, se = np.array(v).T
+        by_scene.setdefault((scene, metric), []).append(d.std(ddof=1) / np.sqrt(np.mean(se ** 2)))
+    for (scene, metric), r in sorted(by_scene.items()):
+        print(f"spread of Delta over {scene}'s references / its SE ({metric}): median {np.median(r):.3f}, "
+              f"range {min(r):.3f}-{max(r):.3f} over {len(r)} error x case pairs")
     if args.json:
         args.json.write_text(json.dumps({"rows": rows, "false_alarm": {"judged": fa_judged, "changed": fa_changed,
                                                                        "flagged": fa_flagged}}, indent=1))
