@@ -81,13 +81,13 @@ def test_independent_channel_formula_would_underestimate():
 
 
 def test_resampling_se_matches_the_spread_for_flip():
-    runs = _over_references(5, "flip", 1.0, 30, draws=12)
-    assert all(d.method == "resampling" and d.dof == 11 for d, *_ in runs)
+    runs = _over_references(5, "flip", 1.0, 20, draws=8)
+    assert all(d.method == "resampling" and d.dof == 7 for d, *_ in runs)
     spread = float(np.std([d.delta for d, *_ in runs], ddof=1))
     se = float(np.sqrt(np.mean([d.se ** 2 for d, *_ in runs])))
     print(f"flip: spread of Delta {spread:.4g}, rms SE {se:.4g}, ratio {se / spread:.3f}")
-    # 30 references: the spread itself is known to about +-13 % (1 sigma)
-    assert 0.65 * spread <= se <= 1.45 * spread
+    # 20 references: the spread itself is known to about +-16 % (1 sigma)
+    assert 0.6 * spread <= se <= 1.5 * spread
 
 
 def test_delta_is_the_change_in_badness():
