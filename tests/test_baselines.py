@@ -55,6 +55,50 @@ class TestValidation:
                                              r"regenerate-references --scene thin_ring`"):
             baselines.committed_reference(small_scene("thin_ring"))
 
+    def _entry(self, scene="thin_ring"):
+        from sslpv_gl.params import SSLPVParams
+
+        return baselines.find_entry(baselines.read_baseline(scene), [64, 64], SSLPVParams(N=16, steps=8).as_dict())
+
+    def test_committed_images_exist_for_every_accuracy_case(self):
+        from harness.regression.accuracy import cases
+        from harness.runs.params import config_label
+
+        for scene, params, _ in cases():
+            e = baselines.find_entry(baselines.read_baseline(scene), [64, 64], params.as_dict())
+            assert e is not None and e["image"] == baselines.image_name(scene, config_label(params), [64, 64])
+            assert e["gl_renderer"] and (baselines.BASELINE_DIR / e["image"]).is_file()
+        img, mask = baselines.committed_image("thin_ring", self._entry())
+        assert img.shape == (64, 64, 3) and mask.dtype == bool and mask.any()
+
+    def test_missing_committed_image(self, sandbox):
+        e = self._entry()
+        (sandbox / e["image"]).unlink()
+        with pytest.raises(InputError, match=r"images/thin_ring/N16-K8-collision-64x64\.exr: file: the committed "
+                                             r"SSLPV image of thin_ring N16-K8-collision is missing; run a 64x64 "
+                                             r"sweep .*baselines update"):
+            baselines.committed_image("thin_ring", e)
+
+    def test_committed_image_of_the_wrong_size(self, sandbox):
+        from harness.io.images import write_exr
+
+        e = self._entry()
+        write_exr(sandbox / e["image"], np.zeros((32, 32, 3)), extra={"mask": np.ones((32, 32))})
+        with pytest.raises(InputError, match=r"N16-K8-collision-64x64\.exr: size: is 32x32, the baseline entry "
+                                             r"is 64x64; run a 64x64 sweep"):
+            baselines.committed_image("thin_ring", e)
+
+    def test_reference_without_standard_error(self, sandbox):
+        from harness.io.images import read_exr, write_exr
+        from harness.regression.accuracy import case_reference, reference_se, small_scene
+
+        path = sandbox / "refs" / "thin_ring" / "subsurface.exr"
+        write_exr(path, read_exr(path)["rgb"])
+        ref = case_reference(small_scene("thin_ring"))
+        with pytest.raises(InputError, match=r"refs/thin_ring/subsurface\.exr: se: has no per-pixel standard error "
+                                             r".*regenerate-references"):
+            reference_se(ref)
+
     def test_update_with_no_store(self, capsys):
         assert main(["baselines", "update"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -63,6 +107,23 @@ class TestValidation:
     def test_update_with_missing_store(self, tmp_path, capsys):
         assert main(["baselines", "update", "--store", str(tmp_path / "nope.sqlite")]) == 2
         assert "no results store at" in capsys.readouterr().err
+
+    def test_update_whose_renders_are_gone(self, sandbox, tmp_path, capsys):
+        from harness.regression.accuracy import small_scene
+        from harness.store import Store
+        from sslpv_gl.params import SSLPVParams
+
+        store = tmp_path / "store.sqlite"
+        with Store(store) as st:
+            rid = st.start_run("sweep", {})
+            st.record_config(rid, "thin_ring", small_scene("thin_ring").content_hash, SSLPVParams(N=16, steps=8)
+                             .as_dict(), "ok", metrics=[], render_dir=str(tmp_path / "gone"),
+                             reference_dir=str(sandbox / "refs" / "thin_ring"))
+        before = (sandbox / "thin_ring.json").read_text()
+        assert main(["baselines", "update", "--store", str(store)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "thin_ring N16-K8-collision.render_dir: the SSLPV image" in err[0] and "re-run" in err[0]
+        assert (sandbox / "thin_ring.json").read_text() == before
 
 
 class TestUpdate:
@@ -78,12 +139,24 @@ class TestUpdate:
         rows = [{"image": img, "metric": m, "value": v["value"] * 1.5, "noise_floor": v["noise_floor"],
                  "per_channel": None, "params": {}}
                 for img, ms in old["metrics"].items() for m, v in ms.items()]
+        from harness.io.images import write_exr
+
+        render = tmp_path / "render"
+        render.mkdir()
+        img = np.full((64, 64, 3), 0.25, np.float32)
+        write_exr(render / "subsurface.exr", img, extra={"mask": np.ones((64, 64), np.float32)})
         store = tmp_path / "store.sqlite"
         with Store(store) as st:
-            rid = st.start_run("accuracy", {})
+            rid = st.start_run("accuracy", {}, gl_renderer="test GL")
             st.record_config(rid, "thin_ring", scene.content_hash, params, "ok", metrics=rows,
-                             reference_dir=str(sandbox / "refs" / "thin_ring"))
+                             render_dir=str(render), reference_dir=str(sandbox / "refs" / "thin_ring"))
+        image_files = {p: p.read_bytes() for p in (sandbox / "images").rglob("*.exr")}
         res = baselines.update(store, scene="thin_ring")
+        new = baselines.find_entry(baselines.read_baseline("thin_ring"), [64, 64], params)
+        assert new["gl_renderer"] == "test GL" and res["images"] == [str(sandbox / new["image"])]
+        assert np.array_equal(baselines.committed_image("thin_ring", new)[0], img)
+        changed_images = {p for p, b in image_files.items() if p.read_bytes() != b}
+        assert changed_images == {sandbox / new["image"]}      # only that case's image
         changed = [r for r in res["changes"] if r["metric"] == "relmse"]
         assert len(changed) == 1
         assert changed[0]["before"] == pytest.approx(old["metrics"]["subsurface"]["relmse"]["value"])
@@ -93,6 +166,7 @@ class TestUpdate:
         new_entries = baselines.read_baseline("thin_ring")
         assert len(new_entries) == len(json.loads(before_files["thin_ring.json"])["entries"])
         others = [e for e in new_entries if e["params"] != params]
+        assert len(others) == len(new_entries) - 1
         assert all(e in json.loads(before_files["thin_ring.json"])["entries"] for e in others)
         assert "before" in baselines.format_changes(res["changes"])
 

@@ -1,44 +1,16 @@
-"""Nightly job: verdict arithmetic, and two small nights end to end (64x64, committed references)."""
+"""Nightly job: two small nights end to end (64x64, committed references); the verdict rules
+themselves are tested in ``test_verdict.py``."""
 
 import json
 import re
-import sqlite3
+import shutil
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from harness.cli import main
-from harness.regression.verdict import badness, compare_rows, judge, overall
-
-
-class TestVerdict:
-    def test_badness_is_distance_from_ideal(self):
-        assert badness("relmse", 0.2) == 0.2
-        assert badness("energy_ratio", 0.7) == pytest.approx(0.3)
-        assert badness("energy_ratio", 1.3) == pytest.approx(0.3)
-        assert badness("ssim", 0.9) == pytest.approx(0.1)
-
-    def test_within_noise_and_tolerance_is_unchanged(self):
-        # threshold = 0.01 + 0.01 + max(1e-4, 0.05 * 0.2) = 0.03
-        c = judge("s", "c", "subsurface", "relmse", 0.20, 0.01, 0.229, 0.01, {"rel": 0.05, "abs": 1e-4})
-        assert c.threshold == pytest.approx(0.03) and c.verdict == "unchanged"
-
-    def test_beyond_is_regression_or_improvement(self):
-        tol = {"rel": 0.05, "abs": 1e-4}
-        assert judge("s", "c", "subsurface", "relmse", 0.20, 0.01, 0.231, 0.01, tol).verdict == "regression"
-        assert judge("s", "c", "subsurface", "relmse", 0.20, 0.01, 0.169, 0.01, tol).verdict == "improvement"
-
-    def test_energy_ratio_moving_away_from_one_regresses(self):
-        tol = {"rel": 0.0, "abs": 0.01}
-        assert judge("s", "c", "subsurface", "energy_ratio", 1.05, 1.0, 1.2, 1.0, tol).verdict == "regression"
-        assert judge("s", "c", "subsurface", "energy_ratio", 0.8, 1.0, 0.95, 1.0, tol).verdict == "improvement"
-
-    def test_compare_rows_matches_keys_and_headline_only(self):
-        old = [{"scene": "a", "config": "x", "image": "subsurface", "metric": m, "value": 0.1, "noise_floor": 0.0}
-               for m in ("relmse", "rmse")]
-        new = [dict(r, value=0.5) for r in old] + [dict(old[0], scene="b")]
-        changes = compare_rows(old, new, {"rel": 0.0, "abs": 0.0})
-        assert [(c.scene, c.metric, c.verdict) for c in changes] == [("a", "relmse", "regression")]
-        assert overall(changes) == "regression" and overall([]) == "unchanged"
+from harness.paths import REPO
 
 
 MATRIX = """
@@ -54,29 +26,63 @@ abs = 1e-4
 """
 
 
+def _render_dir(store, run_id, scene, n):
+    from harness.store import Store
+
+    with Store(store) as st:
+        return next(Path(c["render_dir"]) for c in st.configs(run_id=run_id)
+                    if c["scene"] == scene and c["params"]["N"] == n)
+
+
 @pytest.mark.gl
 @pytest.mark.slow
 def test_two_nights_verdicts_and_index(tmp_path, capsys):
+    from harness.io.images import read_exr, write_exr
+
     matrix = tmp_path / "matrix.toml"
     matrix.write_text(MATRIX)
     store, out = tmp_path / "nightly.sqlite", tmp_path / "nightly"
     args = ["nightly", "--matrix", str(matrix), "--store", str(store), "--out", str(out), "--json"]
     assert main(args + ["--date", "2026-11-20"]) == 0
     first = json.loads(capsys.readouterr().out)
-    assert first["verdict"] in ("unchanged", "improvement") and first["configurations"] == 4
+    # the same renderer as the committed baseline images: nothing changed (N16-K8-collision has one)
+    assert first["verdict"] == "unchanged" and first["configurations"] == 4 and first["changed_images"] == 0
+    night1 = json.loads((out / "2026-11-20" / "night.json").read_text())
+    assert night1["baseline_comparisons"] == 2 and night1["previous_comparisons"] == 0
 
-    # Make night 1 look far better than SSLPV is, so night 2 must be judged a regression.
-    with sqlite3.connect(store) as db:
-        db.execute("UPDATE metrics SET value = value * 0.5 WHERE metric = 'relmse' AND image = 'subsurface'")
+    # Make last night's thin_ring N8 render the reference itself (tonight's real render must be a regression),
+    # last night's absorbing_sphere N8 spoilt by strong per-pixel noise (tonight improves), and delete one folder.
+    run1 = night1["run_id"]
+    ring = _render_dir(store, run1, "thin_ring", 8)
+    ref = read_exr(REPO / "baselines" / "refs" / "thin_ring" / "subsurface.exr")["rgb"]
+    mask = read_exr(ring / "subsurface.exr")["mask"]
+    for part in ("subsurface", "full"):
+        write_exr(ring / f"{part}.exr", ref, extra={"mask": mask})
+    sphere = _render_dir(store, run1, "absorbing_sphere", 8)
+    z = np.random.default_rng(0).standard_normal((64, 64, 1))
+    for part in ("subsurface", "full"):
+        layers = read_exr(sphere / f"{part}.exr")
+        write_exr(sphere / f"{part}.exr", layers["rgb"] * np.exp(0.5 * z - 0.125), extra={"mask": layers["mask"]})
+    gone = _render_dir(store, run1, "absorbing_sphere", 16)
+    shutil.rmtree(gone)
+
     assert main(args + ["--date", "2026-11-21"]) == 1
     second = json.loads(capsys.readouterr().out)
-    assert second["verdict"] == "regression" and second["regressions"] >= 4
+    assert second["verdict"] == "regression" and second["changed_images"] == 2
     night = json.loads((out / "2026-11-21" / "night.json").read_text())
-    reg = night["regressions"][0]
-    assert reg["metric"] == "relmse" and reg["against"] == "previous-night" and reg["scene"] in MATRIX
-    assert reg["new"] > reg["old"] and reg["delta"] > reg["threshold"]
+    regs = {(c["scene"], c["metric"]) for c in night["regressions"]}
+    assert ("thin_ring", "relmse") in regs and all(c["against"] == "previous-night" for c in night["regressions"])
+    reg = next(c for c in night["regressions"] if c["metric"] == "relmse")
+    assert reg["new"] > reg["old"] and reg["delta"] > reg["threshold"] > reg["tolerance"] and reg["se"] > 0
+    # 3 pairs with last night (one folder gone) and 2 with the committed images, subsurface only
+    # (index-matched: full = subsurface), 4 headline metrics each
+    assert reg["z"] > reg["critical"] and reg["family"] == 20 and night["family"] == 20
+    imps = {(c["scene"], c["metric"]) for c in night["improvements"]}
+    assert ("absorbing_sphere", "relmse") in imps
+    assert any(str(gone) in n and "gone" in n for n in night["notes"]), night["notes"]
     page = (out / "2026-11-21" / "index.html").read_text()
-    assert "regression" in page and reg["config"] in page
+    assert "regression" in page and "improvement" in page and reg["config"] in page and "SE" in page
+    assert str(gone) in page
     assert (out / "2026-11-21" / "report" / "index.html").is_file()
     assert list((out / "2026-11-21").glob("trend_*_relmse.png"))
     index = (out / "index.html").read_text()
@@ -114,3 +120,40 @@ def test_matrix_also_products(tmp_path):
     m.write_text('[params]\ngrid = [8]\n[[also]]\ngridd = [8]\n')
     with pytest.raises(InputError, match=r"also\[0\]\.gridd: is not a known field"):
         load_matrix(m)
+
+
+def test_judge_night_notes_renderer_scene_and_missing_renders(tmp_path):
+    """The night's pairs without rendering: another GL renderer and a changed scene give one line each."""
+    from harness.io.images import write_exr
+    from harness.reference.committed import committed_reference
+    from harness.regression.accuracy import small_scene
+    from harness.regression.nightly import judge_night
+    from harness.store import Store
+    from sslpv_gl.params import SSLPVParams
+
+    scene = small_scene("thin_ring")
+    img = np.full((64, 64, 3), 0.2, np.float32)
+    mask = np.ones((64, 64), np.float32)
+
+    def render_dir(name):
+        d = tmp_path / name
+        d.mkdir()
+        for part in ("subsurface", "full"):
+            write_exr(d / f"{part}.exr", img, extra={"mask": mask})
+        return str(d)
+
+    p8, p4 = SSLPVParams(N=8, steps=8).as_dict(), SSLPVParams(N=4, steps=8).as_dict()
+    with Store(tmp_path / "s.sqlite") as st:
+        prev = st.start_run("nightly", {}, gl_renderer="GL one")
+        st.record_config(prev, "thin_ring", scene.content_hash, p8, "ok", render_dir=render_dir("a"))
+        st.record_config(prev, "thin_ring", "f" * 64, p4, "ok", render_dir=render_dir("b"))
+        now = st.start_run("nightly", {}, gl_renderer="GL two")
+        st.record_config(now, "thin_ring", scene.content_hash, p8, "ok", render_dir=render_dir("c"))
+        st.record_config(now, "thin_ring", scene.content_hash, p4, "ok", render_dir=render_dir("d"))
+        res = judge_night(st, now, prev, {"thin_ring": committed_reference(scene)}, ["thin_ring"], [64, 64],
+                          {"rel": 0.05, "abs": 1e-4})
+    assert res["changes"] == [] and [r["changed"] for r in res["images"]] == [False]
+    assert res["family"] == 4                     # one pair (subsurface = full), four headline metrics
+    assert any("'GL one', tonight with 'GL two'" in n for n in res["notes"])
+    assert any("N4-K8-collision: the scene changed since the previous night (hash ffffffffffff" in n
+               for n in res["notes"])

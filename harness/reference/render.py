@@ -40,6 +40,7 @@ import numpy as np
 from harness.io.atomic import atomic_dir
 from harness.errors import InputError
 from harness.io.images import auto_exposure, write_exr, write_png
+from harness.metrics.coverage import FULL_COVERAGE
 
 from . import mitsuba_scene as ms
 
@@ -49,7 +50,6 @@ PILOT_SPP = 16
 MAX_SPP_PER_SEED = 4096
 MAX_LANES = 1 << 22          # samples in flight per mi.render call (memory bound)
 LIT_FRACTION = 0.01          # lit: brighter than this fraction of the 99th percentile
-FULL_COVERAGE = 0.999
 SEED_STRIDE = 1 << 16        # separates the seed ranges of pilot/full/absorber passes
 CHUNK_SEEDS = 4096           # Mitsuba seed = seed * CHUNK_SEEDS + chunk index (< 2**32)
 REFERENCE_FILES = ("full.exr", "subsurface.exr", "half_a.exr", "half_b.exr", "mask.exr", "preview.png",

@@ -3,17 +3,23 @@
 Layout (all committed)::
 
     baselines/<scene>.json            metric values with noise floors, per (size, configuration)
+    baselines/images/<scene>/<config>-<W>x<H>.exr
+                                      the SSLPV subsurface image of each entry (float32, with
+                                      the renderer's coverage as the ``mask`` layer): the old
+                                      image of every verdict (:mod:`harness.regression.verdict`)
     baselines/refs/<scene>/           a small (64x64) Mitsuba reference: subsurface.exr, full.exr,
                                       half_a.exr, half_b.exr, mask.exr, reference.json
     baselines/accuracy_matrix.toml    which configurations the pytest accuracy tests check
 
 A baseline entry is ``{"size": [W, H], "scene_hash": ..., "config": label, "params": {...},
-"metrics": {image: {metric: {"value", "noise_floor"}}}, "git_commit", "updated"}``.
+"metrics": {image: {metric: {"value", "noise_floor"}}}, "image": "images/...exr",
+"gl_renderer": GL_RENDERER string of the render, "git_commit", "updated"}``.
 
 Commands (``sslpv-harness baselines ...``):
 
 * ``update --store S [--scene X]``: replace the entries of the configurations found in the
-  store's latest run (for one scene, or all), print a before/after table, change nothing else.
+  store's latest run (for one scene, or all) and their committed images (copied from the
+  run's render folders), print a before/after table, change nothing else.
 * ``show [--scene X]``: print the entries.
 * ``regenerate-references [--scene X]``: render the small reference again with new seeds,
   check it against the committed one with a per-pixel two-sided z-test that uses both noise
@@ -43,6 +49,7 @@ REPO = paths.REPO
 BASELINE_DIR = paths.BASELINE_DIR
 REF_DIR = committed.REF_DIR
 MATRIX_FILE = BASELINE_DIR / "accuracy_matrix.toml"
+IMAGE_DIR_NAME = "images"
 SMALL_SIZE = (64, 64)
 #: Family-wise false-rejection probability of the reference check (per image).
 SIGNIFICANCE = 0.01
@@ -143,6 +150,44 @@ def committed_reference(scene):
     return committed.committed_reference(scene, REF_DIR)
 
 
+def image_name(scene_name, label, size):
+    """Path of an entry's committed image, relative to :data:`BASELINE_DIR`."""
+    return f"{IMAGE_DIR_NAME}/{scene_name}/{label}-{int(size[0])}x{int(size[1])}.exr"
+
+
+def update_command(scene_name=None):
+    """The one-line command that accepts new values and images (for messages)."""
+    return ("run a 64x64 sweep of baselines/accuracy_matrix.toml and `sslpv-harness baselines update "
+            f"--store STORE{' --scene ' + scene_name if scene_name else ''}`")
+
+
+def committed_image(scene_name, entry):
+    """The committed SSLPV image of a baseline entry: ``(rgb (H, W, 3), coverage mask (H, W) bool)``.
+
+    One-line :class:`InputError` for an entry without an image, a missing file, an image
+    of another size than the entry's, or one without the ``mask`` layer.
+    """
+    from harness.io.images import read_exr
+
+    size = entry["size"]
+    where = f"entries[{entry['config']} at {size[0]}x{size[1]}]"
+    if not entry.get("image"):
+        raise InputError(baseline_path(scene_name), f"{where}.image", "has no committed SSLPV image",
+                         update_command(scene_name))
+    path = BASELINE_DIR / entry["image"]
+    if not path.is_file():
+        raise InputError(path, "file", f"the committed SSLPV image of {scene_name} {entry['config']} is missing",
+                         update_command(scene_name))
+    layers = read_exr(path)
+    h, w = layers["rgb"].shape[:2]
+    if [w, h] != list(size):
+        raise InputError(path, "size", f"is {w}x{h}, the baseline entry is {size[0]}x{size[1]}",
+                         update_command(scene_name))
+    if "mask" not in layers:
+        raise InputError(path, "mask", "has no coverage layer 'mask'", update_command(scene_name))
+    return layers["rgb"], layers["mask"] > 0.5
+
+
 # --------------------------------------------------------------------------- update
 
 def _rows_from_store(store_path, scene=None):
@@ -158,7 +203,7 @@ def _rows_from_store(store_path, scene=None):
         if not runs:
             raise InputError(store_path, "runs", "the store holds no configurations", "run a sweep first")
         configs = st.configs(run_id=runs[-1]["id"], scene=scene)
-    return [c for c in configs if c["status"] == "ok"]
+    return [c for c in configs if c["status"] == "ok"], runs[-1]
 
 
 def _size_of(config):
@@ -177,11 +222,12 @@ def update(store_path, scene=None, yes=True, commit=None):
 
     if scene is not None and not scene_path(scene).is_file():
         raise InputError("--scene", "scene", f"unknown scene {scene!r}", f"choose from: {', '.join(list_scenes())}")
-    configs = _rows_from_store(store_path, scene)
+    configs, run = _rows_from_store(store_path, scene)
+    gl = run.get("gl_renderer") or "unknown"
     if not configs:
         raise InputError(store_path, "configurations", f"no successful configuration{' of ' + scene if scene else ''}"
                          " in the latest run", "run the sweep for that scene first")
-    changed, table = {}, []
+    changed, table, images = {}, [], {}
     now = datetime.now(timezone.utc).isoformat(timespec="seconds")
     for c in configs:
         name = c["scene"]
@@ -193,10 +239,16 @@ def update(store_path, scene=None, yes=True, commit=None):
             raise InputError(store_path, f"{name}.scene_hash", "the store's values were measured on an older "
                              "version of the scene", "re-run the sweep on the current scene")
         label = config_label(c["params"])
+        src = Path(c["render_dir"] or "") / "subsurface.exr"
+        if not c["render_dir"] or not src.is_file():
+            raise InputError(store_path, f"{name} {label}.render_dir", f"the SSLPV image {src} is gone",
+                             "re-run the sweep (or the accuracy test) that made this store")
+        rel = image_name(name, label, size)
+        images[rel] = src
         new = {"size": size, "scene_hash": c["scene_hash"], "config": label, "params": c["params"],
                "metrics": {img: {m: {"value": v["value"], "noise_floor": v["noise_floor"]} for m, v in ms.items()}
                            for img, ms in c["metrics"].items()},
-               "git_commit": commit or git_commit(), "updated": now}
+               "image": rel, "gl_renderer": gl, "git_commit": commit or git_commit(), "updated": now}
         entries = changed[name]
         old = find_entry(entries, size, c["params"])
         for metric in ("relmse", "si_relmse", "energy_ratio", "flip"):
@@ -209,11 +261,20 @@ def update(store_path, scene=None, yes=True, commit=None):
         else:
             entries.append(new)
     if yes:
+        from harness.io.images import read_exr, write_exr
+
+        for rel, src in images.items():
+            layers = read_exr(src)
+            if "mask" not in layers:
+                raise InputError(src, "mask", "has no coverage layer 'mask'", "re-run the sweep that made it")
+            (BASELINE_DIR / rel).parent.mkdir(parents=True, exist_ok=True)
+            write_exr(BASELINE_DIR / rel, layers["rgb"], extra={"mask": layers["mask"]})
         for name, entries in changed.items():
             entries.sort(key=lambda e: (e["size"], e["config"]))
             with atomic_write(baseline_path(name)) as tmp:
                 tmp.write_text(json.dumps({"scene": name, "entries": entries}, indent=1, sort_keys=True) + "\n")
-    return {"written": sorted(str(baseline_path(n)) for n in changed) if yes else [], "changes": table}
+    return {"written": sorted(str(baseline_path(n)) for n in changed) if yes else [],
+            "images": sorted(str(BASELINE_DIR / r) for r in images) if yes else [], "changes": table}
 
 
 def format_changes(changes):

@@ -2,13 +2,22 @@
 
 1. Runs the sweep declared in ``harness/regression/nightly_matrix.toml`` (references from the cache)
    and appends it to the store as a ``nightly`` run with the date and git commit.
-2. Judges every headline metric (:data:`harness.regression.verdict.HEADLINE`, subsurface and full)
-   against the previous night and against the committed baselines: a regression is a
-   change beyond the combined noise floors plus the matrix's tolerance.
+2. Judges every configuration against the previous night's render of it (subsurface and
+   full image; the full image only where it differs from the subsurface one) and, at the
+   committed size, against the committed image of the accuracy baselines, in the two
+   steps of :mod:`harness.regression.verdict`: images equal within the floating-point
+   tolerance are *unchanged*; a changed pair is judged per headline metric as a paired
+   difference against tonight's reference (Delta, its standard error, z, the threshold
+   ``tol + t SE``, Bonferroni over every comparison of the night). Pairs that cannot be
+   made (last night's renders deleted, the scene changed, another GL renderer) are named
+   in one line each.
 3. Writes ``reports/nightly/<date>/``: the sweep report (``report/``), trend plots of each
    headline metric over past nights per scene and configuration, the verdict with every
    regression and improvement; and ``reports/nightly/index.html``, the nights newest first.
-4. Exits non-zero (1) on a regression.
+4. Exits non-zero (1) on a regression; improvements are reported and exit 0.
+
+The previous night's render folders (``reports/nightly/runs/<date>/renders``) must be kept
+until the next night, beside ``reports/nightly.sqlite``.
 """
 
 import json
@@ -18,12 +27,14 @@ from typing import Annotated, Literal, Optional, Union
 
 from pydantic import Field
 
+import numpy as np
+
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.io.outputs import check_nightly_folder
 from harness.errors import InputError
 from harness.runs.params import check_products, config_label, param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
-from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, compare_rows, overall
+from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, image_change, judge_images, overall
 from harness.validation import ImageSize, InputModel, read_toml, validate
 
 TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
@@ -63,36 +74,119 @@ def load_matrix(path):
             "path": str(path)}
 
 
-def rows_for_run(store, run_id):
-    """Headline metric rows of one run, keyed by scene and configuration label."""
-    rows = []
-    for c in store.configs(run_id=run_id):
-        if c["status"] != "ok":
-            continue
-        label = config_label(c["params"])
-        for image, ms in c["metrics"].items():
-            for metric, m in ms.items():
-                rows.append({"scene": c["scene"], "config": label, "image": image, "metric": metric,
-                             "value": m["value"], "noise_floor": m["noise_floor"]})
-    return rows
+def _render_images(render_dir):
+    """``{"subsurface", "full", "mask"}`` of an SSLPV render folder, or None when it is gone."""
+    from harness.io.images import read_exr
+
+    d = Path(render_dir or "")
+    if not render_dir or not (d / "subsurface.exr").is_file() or not (d / "full.exr").is_file():
+        return None
+    sub = read_exr(d / "subsurface.exr")
+    return {"subsurface": sub["rgb"], "full": read_exr(d / "full.exr")["rgb"], "mask": sub["mask"] > 0.5}
 
 
-def baseline_rows(scenes, size):
-    """Committed baseline rows at the nightly's image size (scenes without any are skipped)."""
-    from harness.regression.baselines import read_baseline
+def _baseline_images(scenes, size):
+    """``{(scene, config label): (entry, loader)}`` of the committed images at the nightly's size."""
+    from harness.regression.baselines import committed_image, read_baseline
 
-    rows = []
+    out = {}
     for name in scenes:
         scene = load_scene(name)
         want = list(size) if size else [scene.camera.width, scene.camera.height]
-        for e in read_baseline(name):
-            if list(e["size"]) != want:
+        # scene hashes are compared per pair (one line each), so one stale entry does not stop the night
+        for e in read_baseline(name, check_scene=False):
+            if list(e["size"]) == want and e.get("image"):
+                out[(name, config_label(e["params"]))] = (e, lambda n=name, e=e: committed_image(n, e))
+    return out
+
+
+def judge_night(store, run_id, prev_run_id, references, scenes, size, tolerance, draws=None):
+    """Tonight's configurations against the previous night's renders and the committed images.
+
+    Returns ``{"changes": [Change], "images": [pair rows], "notes": [one line each],
+    "family": m}``; a pair row is ``{scene, config, image, against, changed, line}``.
+    """
+    from harness.runs.sweep import load_reference
+
+    now = [c for c in store.configs(run_id=run_id) if c["status"] == "ok"]
+    gl_now = store.run(run_id).get("gl_renderer")
+    notes, pairs = [], []
+    prev_by_key, prev_by_label = {}, {}
+    if prev_run_id is not None:
+        gl_prev = store.run(prev_run_id).get("gl_renderer")
+        if gl_prev and gl_now and gl_prev != gl_now:
+            notes.append(f"the previous night rendered with {gl_prev!r}, tonight with {gl_now!r}")
+        for c in store.configs(run_id=prev_run_id):
+            if c["status"] == "ok":
+                prev_by_key[c["config_key"]] = c
+                prev_by_label[(c["scene"], config_label(c["params"]))] = c
+    base = _baseline_images(scenes, size)
+    # Plan every pair first: the Bonferroni family is every comparison the night can judge.
+    for c in now:
+        label = config_label(c["params"])
+        p = prev_by_key.get(c["config_key"])
+        if p is None and (c["scene"], label) in prev_by_label:
+            old_hash = prev_by_label[(c["scene"], label)]["scene_hash"]
+            notes.append(f"{c['scene']} {label}: the scene changed since the previous night (hash "
+                         f"{old_hash[:12]} -> {c['scene_hash'][:12]}); not compared")
+        if p is not None:
+            pairs.append(("previous-night", c, p))
+        if (c["scene"], label) in base:
+            entry, _ = base[(c["scene"], label)]
+            if entry["scene_hash"] != c["scene_hash"]:
+                notes.append(f"{c['scene']} {label}: the baseline was made for scene hash {entry['scene_hash'][:12]}, "
+                             f"tonight's scene hashes to {c['scene_hash'][:12]}; not compared")
                 continue
-            for image, ms in e["metrics"].items():
-                for metric, m in ms.items():
-                    rows.append({"scene": name, "config": e["config"], "image": image, "metric": metric,
-                                 "value": m["value"], "noise_floor": m["noise_floor"]})
-    return rows
+            if entry.get("gl_renderer") and gl_now and entry["gl_renderer"] != gl_now:
+                notes.append(f"{c['scene']} {label}: the committed image was rendered by {entry['gl_renderer']!r}, "
+                             f"tonight by {gl_now!r}")
+            pairs.append(("baseline", c, base[(c["scene"], label)]))
+    loaded, refs, rows, changes, todo = {}, {}, [], [], []
+    for against, c, old in pairs:
+        label = config_label(c["params"])
+        new = loaded.get(c["render_dir"]) or _render_images(c["render_dir"])
+        loaded[c["render_dir"]] = new
+        if new is None:
+            notes.append(f"{c['scene']} {label}: tonight's render folder {c['render_dir']} is gone; not compared")
+            continue
+        if against == "previous-night":
+            old_imgs = _render_images(old["render_dir"])
+            if old_imgs is None:
+                notes.append(f"{c['scene']} {label}: the previous night's render folder {old['render_dir']} is "
+                             "gone; not compared (keep reports/nightly/runs/<date> until the next night)")
+                continue
+            parts = ["subsurface"]
+            if not (np.array_equal(new["full"], new["subsurface"]) and
+                    np.array_equal(old_imgs["full"], old_imgs["subsurface"])):
+                parts.append("full")        # with a reflection; else the same image twice
+        else:
+            try:
+                rgb, mask = old[1]()
+            except InputError as exc:              # a missing or broken committed image: one line
+                notes.append(f"{c['scene']} {label}: {exc}; not compared")
+                continue
+            old_imgs, parts = {"subsurface": rgb, "mask": mask}, ["subsurface"]
+        for part in parts:
+            todo.append((against, c, label, part, new, old_imgs))
+    family = max(len(todo) * len(HEADLINE), 1)
+    for against, c, label, part, new, old_imgs in todo:
+        ic = image_change(new[part], old_imgs[part], new["mask"], old_imgs["mask"])
+        rows.append({"scene": c["scene"], "config": label, "image": part, "against": against,
+                     "changed": ic.changed, "line": ic.line()})
+        if not ic.changed:
+            continue
+        if c["scene"] not in refs:
+            rdir = references[c["scene"]]
+            refs[c["scene"]] = load_reference(rdir, new["subsurface"].shape[:2])
+        ref = refs[c["scene"]]
+        se = ref["se"] if part == "subsurface" else ref["se_full"]
+        if se is None:
+            raise InputError(Path(ref["dir"]) / f"{part}.exr", "se", "has no per-pixel standard error "
+                             "(channels R_se, G_se, B_se), so a change cannot be judged against its noise",
+                             "delete the cached reference so that it is rendered again")
+        changes += judge_images(c["scene"], label, part, new[part], old_imgs[part], ref[part], se, ref["mask"],
+                                tolerance, family, against, k=ref.get("K"), draws=draws)
+    return {"changes": changes, "images": rows, "notes": notes, "family": family}
 
 
 def trend_plots(store, night_run_ids, out_dir):
@@ -204,17 +298,17 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
 
     run_id = summary["run_id"]
     tol = matrix["tolerance"]
+    from harness.regression.verdict import ALPHA, IMAGE_ATOL, IMAGE_RTOL
     with Store(store_path) as st:
-        now_rows = rows_for_run(st, run_id)
         nights = [(r["id"], (r.get("config") or {}).get("out", "").rsplit("/", 1)[-1] or r["date"])
                   for r in st.runs(kind="nightly") if r["status"] == "finished"]
         earlier = [(rid, d) for rid, d in nights if d < night]
         prev = earlier[-1] if earlier else None
-        prev_rows = rows_for_run(st, prev[0]) if prev else []
-        changes = compare_rows(prev_rows, now_rows, tol, "previous-night")
-        base = baseline_rows(matrix["scenes"], matrix["size"])
-        changes += compare_rows(base, now_rows, tol, "baseline")
-        verdict = overall(changes)
+        judged = judge_night(st, run_id, prev[0] if prev else None, summary["references"], matrix["scenes"],
+                             matrix["size"], tol)
+        changes = judged["changes"]
+        changed_pairs = [r for r in judged["images"] if r["changed"]]
+        verdict = overall(changes, image_changed=bool(changed_pairs))
         steps.advance(detail=f"verdict: {verdict}")
         night_dir = out_root / night
         with atomic_dir(night_dir) as tmp:
@@ -223,22 +317,28 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
             for rid, d in nights:
                 latest[d] = rid  # a re-run of the same night replaces it in the trend
             trends = trend_plots(st, sorted(((rid, d) for d, rid in latest.items()), key=lambda x: x[1]), tmp)
-            flagged = sorted((c for c in changes if c.verdict != "unchanged"),
-                             key=lambda c: (c.verdict != "regression", -abs(c.delta)))
+            order = {"regression": 0, "improvement": 1, "changed-within-noise": 2}
+            shown = sorted(changes, key=lambda c: (order[c.verdict], -abs(c.z) if np.isfinite(c.z) else -1e308))
             info = {"date": night, "verdict": verdict, "run_id": run_id, "git_commit": st.run(run_id)["git_commit"],
+                    "gl_renderer": st.run(run_id).get("gl_renderer"),
                     "previous_night": prev[1] if prev else None, "configurations": summary["configurations"],
-                    "failed": summary["failed"], "baseline_comparisons": sum(c.against == "baseline" for c in changes),
-                    "previous_comparisons": sum(c.against == "previous-night" for c in changes),
-                    "regressions": [c.as_dict() for c in flagged if c.verdict == "regression"],
-                    "improvements": [c.as_dict() for c in flagged if c.verdict == "improvement"],
-                    "tolerance": tol, "wall_s": summary.get("wall_s")}
+                    "failed": summary["failed"],
+                    "baseline_comparisons": sum(r["against"] == "baseline" for r in judged["images"]),
+                    "previous_comparisons": sum(r["against"] == "previous-night" for r in judged["images"]),
+                    "changed_images": changed_pairs, "family": judged["family"], "notes": judged["notes"],
+                    "regressions": [c.as_dict() for c in shown if c.verdict == "regression"],
+                    "improvements": [c.as_dict() for c in shown if c.verdict == "improvement"],
+                    "within_noise": [c.as_dict() for c in shown if c.verdict == "changed-within-noise"],
+                    "tolerance": tol, "alpha": ALPHA, "image_tolerance": {"rtol": IMAGE_RTOL, "atol": IMAGE_ATOL},
+                    "wall_s": summary.get("wall_s")}
             (tmp / "night.json").write_text(json.dumps(info, indent=1))
-            (tmp / "index.html").write_text(_render("night.html.j2", info=info, trends=trends, changes=flagged))
+            (tmp / "index.html").write_text(_render("night.html.j2", info=info, trends=trends, changes=shown))
     index = write_index(out_root)
     steps.advance(detail=f"report {night_dir}")
     out = {"verdict": verdict, "date": night, "night_dir": str(night_dir), "index": str(index),
            "store": str(store_path), "run_id": run_id, "regressions": len(info["regressions"]),
-           "improvements": len(info["improvements"]), "configurations": summary["configurations"],
+           "improvements": len(info["improvements"]), "changed_images": len(info["changed_images"]),
+           "notes": info["notes"], "configurations": summary["configurations"],
            "failed": summary["failed"], "not_run": summary.get("not_run", 0), "status": summary["status"],
            "sweep_wall_s": summary.get("wall_s")}
     if summary["status"] != "finished":

@@ -34,6 +34,7 @@ from harness.io import images
 from harness.io.atomic import atomic_dir
 from harness.io.outputs import check_replaceable, check_writable
 from harness.errors import InputError
+from harness.metrics.coverage import comparison_mask
 from harness.store import STAGES, Store
 from . import plots
 
@@ -340,11 +341,11 @@ def _reference(rdir, index, img_dir, exr_dir):
         out["png"][kind], out["exr"][kind] = f"img/{png.name}", f"exr/{exr.name}"
         out["images"][kind] = {"png": f"img/{png.name}", "exr": f"exr/{exr.name}", "exposure": exposure}
         if out["mask"] is None and "mask" in layers:
-            out["mask"] = layers["mask"] > 0.5
+            out["mask"] = comparison_mask(layers["mask"])
     if out["mask"] is None and (rdir / "mask.exr").is_file():
         try:
             m = images.read_exr(rdir / "mask.exr")
-            out["mask"] = (m["mask"] if "mask" in m else m["rgb"][..., 0]) > 0.5
+            out["mask"] = comparison_mask(m["mask"] if "mask" in m else m["rgb"][..., 0])
         except InputError:
             pass
     return out

@@ -197,8 +197,18 @@ def config_from_args(args):
 # --------------------------------------------------------------------------- references
 
 def load_reference(ref_dir, shape):
-    """Arrays the workers compare against: subsurface, full, halves and the object mask."""
+    """Arrays the workers compare against: subsurface, full, halves, per-pixel standard errors and the mask.
+
+    ``mask`` is :func:`harness.metrics.coverage.comparison_mask` of the reference's
+    coverage (fully covered pixels only; ``coverage`` keeps the fractions), the one
+    comparison mask of every metric, verdict and calibration. ``se`` and ``se_full``
+    are the standard errors of the subsurface and full images (None where the file
+    has none), ``K`` the number of independent seeds they were estimated from.
+    """
+    import json
+
     from harness.io.images import read_exr
+    from harness.metrics.coverage import comparison_mask
 
     ref_dir = Path(ref_dir)
     sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
@@ -208,10 +218,13 @@ def load_reference(ref_dir, shape):
         mask_layer = read_exr(ref_dir / "mask.exr", expect_shape=shape)["rgb"][..., 0]
     if mask_layer is None:
         raise InputError(ref_dir, "mask", "the reference has no object mask", "re-render the reference")
-    return {"subsurface": sub["rgb"], "full": full["rgb"], "se": sub.get("se"),
+    meta = ref_dir / "reference.json"
+    k = json.loads(meta.read_text()).get("K") if meta.is_file() else None
+    return {"subsurface": sub["rgb"], "full": full["rgb"], "se": sub.get("se"), "se_full": full.get("se"),
             "half_a": read_exr(ref_dir / "half_a.exr", expect_shape=shape)["rgb"],
             "half_b": read_exr(ref_dir / "half_b.exr", expect_shape=shape)["rgb"],
-            "mask": np.asarray(mask_layer) > 0.5}
+            "coverage": np.asarray(mask_layer, dtype=np.float32), "mask": comparison_mask(mask_layer),
+            "K": int(k) if k else None, "dir": str(ref_dir)}
 
 
 def reference_dir(scene, target=None):
