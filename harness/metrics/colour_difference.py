@@ -10,6 +10,26 @@ WHITE_PERCENTILE = 99.0
 CLAMP = 1.0
 
 
+def srgb_to_lab(rgb):
+    """Linear sRGB (white = 1) -> CIE L*a*b* with the D65 white, via CIE XYZ (colour-science).
+
+    ``rgb`` is ``(..., 3)``; ``(1, 1, 1)`` becomes ``L* = 100, a* = b* = 0``.
+    """
+    import colour
+
+    cs = colour.RGB_COLOURSPACES["sRGB"]
+    xyz = colour.RGB_to_XYZ(np.asarray(rgb, dtype=np.float64), cs)
+    return colour.XYZ_to_Lab(xyz, cs.whitepoint)
+
+
+def delta_e_2000(lab_test, lab_ref):
+    """CIEDE2000 colour difference of two ``(..., 3)`` L*a*b* arrays (Sharma, Wu, Dalal 2005; colour-science)."""
+    import colour
+
+    return colour.delta_E(np.asarray(lab_test, dtype=np.float64), np.asarray(lab_ref, dtype=np.float64),
+                          method="CIE 2000")
+
+
 def delta_e_2000_map(test, ref, mask=None, *, white_percentile=WHITE_PERCENTILE, clamp=CLAMP):
     r"""Per-pixel CIEDE2000 map and the parameters used (shared by the two metrics).
 
@@ -25,8 +45,6 @@ def delta_e_2000_map(test, ref, mask=None, *, white_percentile=WHITE_PERCENTILE,
     mask : ndarray of bool, (H, W)
     params : dict
     """
-    import colour
-
     x, y, m = prepare(test, ref, mask)
     white_percentile = float(white_percentile)
     if not 0.0 < white_percentile <= 100.0:
@@ -38,13 +56,7 @@ def delta_e_2000_map(test, ref, mask=None, *, white_percentile=WHITE_PERCENTILE,
     if not white > 0:
         raise ValueError(f"ciede2000: the reference's {white_percentile:g}th-percentile luminance "
                          "over the mask is 0; no white to normalise to")
-    cs = colour.RGB_COLOURSPACES["sRGB"]
-
-    def to_lab(img):
-        rgb = np.clip(img / white, 0.0, clamp)
-        return colour.XYZ_to_Lab(colour.RGB_to_XYZ(rgb, cs), cs.whitepoint)
-
-    de = colour.delta_E(to_lab(x), to_lab(y), method="CIE 2000")
+    de = delta_e_2000(srgb_to_lab(np.clip(x / white, 0.0, clamp)), srgb_to_lab(np.clip(y / white, 0.0, clamp)))
     params = {"white": white, "white_from": f"{white_percentile:g}th percentile of the "
               "reference's Rec.709 luminance over the mask", "white_percentile": white_percentile,
               "clamp": [0.0, clamp], "colourspace": "linear sRGB -> XYZ -> Lab, D65",
