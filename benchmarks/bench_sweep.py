@@ -12,7 +12,7 @@ cluster start-up included, to the last row recorded) and their ratio, and checks
 that both stores hold the same configurations with identical metric values.
 
 The issue's default sweep is ``--grid 16,32,64,128 --steps 4,8,16,32,64`` over the
-default suite; here at ``--size 64x64`` so that the committed 64x64 references
+default suite; here at ``--size small`` (64x64; wide_slab 60x36) so that the committed references
 (``baselines/refs``) are used and nothing is rendered by Mitsuba.
 
 ``--table`` instead measures the grouped sweep's wall time against workers x
@@ -57,7 +57,7 @@ def main(argv=None):
     ap.add_argument("--scenes", help="comma-separated suite scenes (default: all)")
     ap.add_argument("--grid", default="16,32,64,128")
     ap.add_argument("--steps", default="4,8,16,32,64")
-    ap.add_argument("--size", default="64x64")
+    ap.add_argument("--size", default="small")
     ap.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: cores)")
     ap.add_argument("--lp-threads", default=None, help=f"LP_NUM_THREADS (default: {DEFAULT_LP_THREADS})")
     ap.add_argument("--table", action="store_true", help="grouped sweep over workers x LP_NUM_THREADS instead")

@@ -1,4 +1,5 @@
-"""SSLPV accuracy regression tests: each case renders SSLPV at 64x64 and compares it with
+"""SSLPV accuracy regression tests: each case renders SSLPV at its committed small size (64x64, or
+the scene's aspect: wide_slab 60x36) and compares it with
 its committed image (``baselines/images/``); only a changed image is judged, as paired
 differences of the headline metrics against the committed reference
 (``baselines/refs/<scene>``). Run alone with ``pytest -m accuracy``.

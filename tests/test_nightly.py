@@ -1,5 +1,6 @@
-"""Nightly job: two small nights end to end (64x64, committed references); the verdict rules
-themselves are tested in ``test_verdict.py``."""
+"""Nightly job: two small nights end to end (``size = "small"``: each scene at its committed size, 64x64,
+and the non-square wide_slab at 60x36; committed references); the verdict rules themselves are tested in
+``test_verdict.py``."""
 
 import json
 import re
@@ -14,8 +15,8 @@ from harness.paths import REPO
 
 
 MATRIX = """
-scenes = ["thin_ring", "absorbing_sphere"]
-size = [64, 64]
+scenes = ["thin_ring", "absorbing_sphere", "wide_slab"]
+size = "small"
 [params]
 grid = [8, 16]
 steps = [8]
@@ -46,9 +47,9 @@ def test_two_nights_verdicts_and_index(tmp_path, capsys):
     assert main(args + ["--date", "2026-11-20"]) == 0
     first = json.loads(capsys.readouterr().out)
     # the same renderer as the committed baseline images: nothing changed (N16-K8-collision has one)
-    assert first["verdict"] == "unchanged" and first["configurations"] == 4 and first["changed_images"] == 0
+    assert first["verdict"] == "unchanged" and first["configurations"] == 6 and first["changed_images"] == 0
     night1 = json.loads((out / "2026-11-20" / "night.json").read_text())
-    assert night1["baseline_comparisons"] == 2 and night1["previous_comparisons"] == 0
+    assert night1["baseline_comparisons"] == 3 and night1["previous_comparisons"] == 0
 
     # Make last night's thin_ring N8 render the reference itself (tonight's real render must be a regression),
     # last night's absorbing_sphere N8 spoilt by strong per-pixel noise (tonight improves), and delete one folder.
@@ -74,9 +75,9 @@ def test_two_nights_verdicts_and_index(tmp_path, capsys):
     assert ("thin_ring", "relmse") in regs and all(c["against"] == "previous-night" for c in night["regressions"])
     reg = next(c for c in night["regressions"] if c["metric"] == "relmse")
     assert reg["new"] > reg["old"] and reg["delta"] > reg["threshold"] > reg["tolerance"] and reg["se"] > 0
-    # 3 pairs with last night (one folder gone) and 2 with the committed images, subsurface only
+    # 5 pairs with last night (one folder gone) and 3 with the committed images, subsurface only
     # (index-matched: full = subsurface), 4 headline metrics each
-    assert reg["z"] > reg["critical"] and reg["family"] == 20 and night["family"] == 20
+    assert reg["z"] > reg["critical"] and reg["family"] == 32 and night["family"] == 32
     imps = {(c["scene"], c["metric"]) for c in night["improvements"]}
     assert ("absorbing_sphere", "relmse") in imps
     assert any(str(gone) in n and "gone" in n for n in night["notes"]), night["notes"]

@@ -14,7 +14,8 @@ def configure(sp):
     sp.add_argument("--store", type=Path, help="results store (default: OUT/store.sqlite)")
     sp.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
     sp.add_argument("--workers", type=positive_int, help="LocalCluster workers (default: CPU cores)")
-    sp.add_argument("--size", help="image size WxH for SSLPV and reference (default: the scene's)")
+    sp.add_argument("--size", help="image size WxH for SSLPV and reference, or small (each scene at its committed "
+                    "small size, same aspect); default: the scene's")
     sp.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_sslpv_args(sp, multi=True)
 

@@ -29,8 +29,8 @@ import numpy as np
 
 from harness import paths
 from harness.errors import InputError
-from harness.regression.baselines import (SMALL_SIZE, committed_image, committed_reference, find_entry, load_matrix,
-                                          read_baseline)
+from harness.reference.committed import small_scene as _small
+from harness.regression.baselines import committed_image, committed_reference, find_entry, load_matrix, read_baseline
 from harness.regression.verdict import HEADLINE, image_change, judge_images, overall
 from harness.runs.params import config_label, parse_lists, expand
 from harness.scene import load_scene
@@ -84,7 +84,8 @@ def cases(matrix=None):
 
 
 def small_scene(name):
-    return load_scene(name).with_resolution(*SMALL_SIZE)
+    """The suite scene at its committed small size (64x64; a non-square scene keeps its aspect)."""
+    return _small(load_scene(name))
 
 
 def case_reference(scene):
@@ -130,10 +131,13 @@ def check_case(renderer, scene_name, params, tolerance, ref=None, floors=None, a
     scene = small_scene(scene_name)
     entries = read_baseline(scene_name)
     label = config_label(params)
-    entry = find_entry(entries, list(SMALL_SIZE), params.as_dict())
+    size = [scene.camera.width, scene.camera.height]
+    entry = find_entry(entries, size, params.as_dict())
     if entry is None:
-        raise InputError(f"baselines/{scene_name}.json", label, "has no baseline for this configuration",
-                         "create it with a sweep at 64x64 and `sslpv-harness baselines update --store ...`")
+        raise InputError(f"baselines/{scene_name}.json", f"{label} at {size[0]}x{size[1]}",
+                         "has no baseline for this configuration",
+                         "create it with `sslpv-harness sweep --size small ...` and "
+                         "`sslpv-harness baselines update --store ...`")
     old_img, old_mask = old if old is not None else committed_image(scene_name, entry)
     res = renderer.render(scene, params)
     if old_img.shape != res.subsurface.shape:

@@ -7,7 +7,8 @@ Layout (all committed)::
                                       the SSLPV subsurface image of each entry (float32, with
                                       the renderer's coverage as the ``mask`` layer): the old
                                       image of every verdict (:mod:`harness.regression.verdict`)
-    baselines/refs/<scene>/           a small (64x64) Mitsuba reference: subsurface.exr, full.exr,
+    baselines/refs/<scene>/           a small Mitsuba reference (64x64, or the scene's aspect at a longer
+                                      side of 64: harness.reference.committed.small_size): subsurface.exr, full.exr,
                                       half_a.exr, half_b.exr, mask.exr, reference.json
     baselines/accuracy_matrix.toml    which configurations the pytest accuracy tests check
 
@@ -50,6 +51,7 @@ BASELINE_DIR = paths.BASELINE_DIR
 REF_DIR = committed.REF_DIR
 MATRIX_FILE = BASELINE_DIR / "accuracy_matrix.toml"
 IMAGE_DIR_NAME = "images"
+#: The committed size of a square scene; a non-square one keeps its aspect (:func:`committed.small_size`).
 SMALL_SIZE = (64, 64)
 #: Family-wise false-rejection probability of the reference check (per image).
 SIGNIFICANCE = 0.01
@@ -343,7 +345,7 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
     from harness.io.images import read_exr
     from harness.reference.render import render_reference
 
-    scene = load_scene(scene_name).with_resolution(*SMALL_SIZE)
+    scene = committed.small_scene(load_scene(scene_name))
     dest = REF_DIR / scene_name
     old_meta = dest / "reference.json"
     old_info = json.loads(old_meta.read_text()) if old_meta.is_file() else None

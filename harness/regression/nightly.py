@@ -48,8 +48,9 @@ class NightlyMatrix(InputModel):
 
     scenes: Union[Literal["all"], Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]] = Field(
         "all", description='"all", or a list of suite scene names', examples=[["thin_ring", "jade_veins"]])
-    size: Optional[Annotated[list[ImageSize], Field(min_length=2, max_length=2)]] = Field(
-        None, description="image size [W, H]; default: each scene's own", examples=[[128, 128]])
+    size: Optional[Union[Literal["small"], Annotated[list[ImageSize], Field(min_length=2, max_length=2)]]] = Field(
+        None, description='image size [W, H], or "small" (each scene at its committed small size, its own aspect); '
+        "default: each scene's own", examples=[[128, 128], "small"])
     params: _PRODUCT = Field(default_factory=_PRODUCT, description="every combination is rendered")
     also: list[_PRODUCT] = Field([], description="further products, as [[also]] tables")
     tolerance: ToleranceSpec = Field(default_factory=ToleranceSpec)
@@ -87,12 +88,13 @@ def _render_images(render_dir):
 
 def _baseline_images(scenes, size):
     """``{(scene, config label): (entry, loader)}`` of the committed images at the nightly's size."""
+    from harness.reference.committed import sized_scene
     from harness.regression.baselines import committed_image, read_baseline
 
     out = {}
     for name in scenes:
-        scene = load_scene(name)
-        want = list(size) if size else [scene.camera.width, scene.camera.height]
+        sized = sized_scene(load_scene(name), size)          # "small": each scene's committed size
+        want = [sized.camera.width, sized.camera.height]
         # scene hashes are compared per pair (one line each), so one stale entry does not stop the night
         for e in read_baseline(name, check_scene=False):
             if list(e["size"]) == want and e.get("image"):

@@ -7,7 +7,10 @@ option                 meaning
 ``--scenes A,B``       suite scenes (default: all)
 ``--grid 16,32``       any renderer parameter as a comma-separated list
                        (``--steps``, ``--mapping``, ``--lookup``, ...)
-``--size WxH``         image size for SSLPV and the reference (default: the scene's)
+``--size WxH``         image size for SSLPV and the reference (default: the scene's);
+                       ``--size small``: each scene at its committed small size (64x64, or
+                       its own aspect: ``harness.reference.committed.small_size``), whose
+                       committed references are used
 ``--scheduler ADDR``   run on an existing Dask cluster (default: a LocalCluster with
                        one single-threaded worker process per core; see "CPU use")
 ``--config FILE``      re-run from the ``sweep.json`` a sweep wrote
@@ -71,7 +74,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Annotated, Optional, Union
+from typing import Annotated, Literal, Optional, Union
 
 import numpy as np
 from dask.distributed import WorkerPlugin
@@ -85,6 +88,7 @@ from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, conf
     param_lists_model, parse_lists, product_dict
 from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, ImageSize, read_json, validate
 
+from harness.reference.committed import sized_scene
 from harness.scene import list_scenes, load_scene, scene_path
 
 
@@ -121,7 +125,8 @@ class SweepConfig:
     params: Union[_PRODUCT, list[_PRODUCT]]  # SSLPVParams field -> list of values (or a list of such products)
     out: str                                 # output folder
     store: str = ""                          # results store (default OUT/store.sqlite)
-    size: Optional[Annotated[list[ImageSize], Field(min_length=2, max_length=2)]] = None  # [W, H]; None: scene's
+    # [W, H]; "small": each scene at its committed small size (its own aspect); None: the scene's own
+    size: Optional[Union[Literal["small"], Annotated[list[ImageSize], Field(min_length=2, max_length=2)]]] = None
     kind: str = "sweep"                      # run kind in the store
     reference_target: Optional[Annotated[float, Field(gt=0, lt=1)]] = None  # median rel. SE asked of references
 
@@ -144,14 +149,17 @@ class SweepConfig:
 
 
 def parse_size(text):
+    """``WxH`` -> ``[W, H]``; ``small`` -> ``"small"``; None -> None."""
     if text is None:
         return None
+    if str(text).strip().lower() == "small":
+        return "small"
     try:
         w, h = (int(x) for x in str(text).lower().split("x"))
         if w <= 0 or h <= 0:
             raise ValueError
     except ValueError:
-        raise InputError("--size", "size", f"{text!r} is not WIDTHxHEIGHT", "write e.g. 128x128") from None
+        raise InputError("--size", "size", f"{text!r} is not WIDTHxHEIGHT", "write e.g. 128x128, or small") from None
     if w > MAX_IMAGE_SIZE or h > MAX_IMAGE_SIZE:
         raise InputError("--size", "size", f"{w}x{h} is larger than {MAX_IMAGE_SIZE}x{MAX_IMAGE_SIZE}",
                          f"give a width and height of at most {MAX_IMAGE_SIZE}, e.g. 128x128")
@@ -391,9 +399,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     configs = expand_all(cfg.params)
     if not configs:
         raise InputError("sweep", "params", "no configurations", "give at least one value per parameter")
-    scenes = [load_scene(n) for n in cfg.scenes]
-    if cfg.size:
-        scenes = [s.with_resolution(*cfg.size) for s in scenes]
+    scenes = [sized_scene(load_scene(n), cfg.size) for n in cfg.scenes]
     # ---- every output is checked before the first thing is written (and before minutes of references)
     check_sweep_folder(out)
     check_writable(store_path, "--store")
@@ -513,7 +519,8 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
         tag = members[0][1] if len(members) == 1 else "group-" + members[0][1] + f"-{len(members)}"
         tag += f"-r{attempts[i]}" if attempts[i] else ""
         # Priority: groups come largest first; Dask runs higher priorities first.
-        fut = client.submit(sweep_worker.run_group, str(s.path), cfg.size, p.as_dict(), ks, ref_f, floors,
+        size = [s.camera.width, s.camera.height] if cfg.size else None      # each scene's own ("small")
+        fut = client.submit(sweep_worker.run_group, str(s.path), size, p.as_dict(), ks, ref_f, floors,
                             key=f"sslpv-{tag}", pure=False, retries=2, priority=n_groups - i)
         pending[fut] = i
 

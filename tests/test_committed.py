@@ -1,0 +1,42 @@
+"""The committed small size (``harness.reference.committed``): a non-square scene keeps its aspect."""
+
+import pytest
+
+from harness.errors import InputError
+from harness.reference.committed import find_committed_reference, sized_scene, small_scene, small_size
+from harness.regression.accuracy import small_scene as accuracy_scene
+from harness.runs.sweep import parse_size
+from harness.scene import list_scenes, load_scene
+
+
+@pytest.mark.parametrize("size,small", [((128, 128), [64, 64]), ((64, 64), [64, 64]), ((160, 96), [60, 36]),
+                                        ((96, 160), [36, 60]), ((1280, 720), [64, 36]), ((100, 37), [64, 24])])
+def test_small_size(size, small):
+    assert small_size(*size) == small
+
+
+def test_exact_aspect_where_possible():
+    for w, h in ((160, 96), (1280, 720), (300, 200), (128, 96)):
+        sw, sh = small_size(w, h)
+        assert sw * h == sh * w and max(sw, sh) <= 64, (w, h, sw, sh)
+
+
+def test_sized_scene():
+    scene = load_scene("wide_slab")
+    assert sized_scene(scene, None) is scene
+    small = sized_scene(scene, "small")
+    assert (small.camera.width, small.camera.height) == (60, 36)
+    assert small.content_hash == small_scene(scene).content_hash == accuracy_scene("wide_slab").content_hash
+    assert (sized_scene(scene, [32, 20]).camera.width, sized_scene(scene, [32, 20]).camera.height) == (32, 20)
+
+
+def test_every_suite_scene_has_its_committed_reference():
+    missing = [n for n in list_scenes() if find_committed_reference(small_scene(load_scene(n))) is None]
+    assert not missing, f"no committed small reference for the current version of: {', '.join(missing)}"
+
+
+def test_parse_size():
+    assert parse_size("small") == "small" and parse_size("Small") == "small"
+    assert parse_size("160x96") == [160, 96] and parse_size(None) is None
+    with pytest.raises(InputError, match="or small"):
+        parse_size("64")
