@@ -9,6 +9,11 @@ suite that silently skipped its GL tests would report a pass it never earned.
 The renderer keeps per-(N, precision) grids and caches between tests; tests
 must not rely on state left by another test beyond what they rendered
 themselves.
+
+``synthetic_site``: ONE synthetic results store and its report site
+(:mod:`tests.synthetic_store`) for the session, shared by the report tests and the
+browser tests; tests that need another site build it in their own ``tmp_path``,
+and a test that adds a page to this one removes it again.
 """
 
 import pytest
@@ -25,3 +30,15 @@ def gl_renderer():
         pytest.fail(str(exc), pytrace=False)
     yield renderer
     renderer.ctx.release()
+
+
+@pytest.fixture(scope="session")
+def synthetic_site(tmp_path_factory):
+    from harness.report import build_report
+
+    from .synthetic_store import make_synthetic_store
+
+    root = tmp_path_factory.mktemp("report")
+    store_path, run = make_synthetic_store(root)
+    info = build_report(store_path, root / "site")
+    return root, store_path, run, info

@@ -17,7 +17,6 @@ What each group checks, and the tolerance it states:
 
 import dataclasses
 import json
-import time
 
 import numpy as np
 import pytest
@@ -453,9 +452,9 @@ class TestRenderAndCache:
         p1 = cache.reference_for(scene, tmp_path, spp=4, K=2)
         assert render.RENDER_COUNT == n0 + 1
         assert p1 == tmp_path / scene.name / scene.content_hash[:16]
-        t = time.perf_counter()
+        # a hit renders nothing (the render count says so; a wall-clock bound would flake under load)
         p2 = cache.reference_for(scene, tmp_path, spp=4, K=2)
-        assert p2 == p1 and render.RENDER_COUNT == n0 + 1 and time.perf_counter() - t < 1.0
+        assert p2 == p1 and render.RENDER_COUNT == n0 + 1
         # A changed scene has a new hash and is rendered, never served the old folder.
         changed = _tiny_scene(sigma_t=scene.medium.sigma_t * 1.5)
         assert changed.content_hash != scene.content_hash

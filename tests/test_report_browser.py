@@ -16,9 +16,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from harness.report import build_report
 
-from .test_report import make_synthetic_store
 
 pytestmark = pytest.mark.browser
 
@@ -104,10 +102,9 @@ def screenshot(page, profile, out, size=(1400, 2400)):
 
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory):
-    root = tmp_path_factory.mktemp("browser")
-    store_path, _ = make_synthetic_store(root)
-    info = build_report(store_path, root / "site")
+def site(synthetic_site):
+    """The session's synthetic site (conftest), shared with test_report."""
+    root, _, _, info = synthetic_site
     return root, info
 
 

@@ -93,33 +93,48 @@ def test_failed_configuration_is_recorded_and_retried_on_resume(tmp_path, monkey
 
 
 def test_killed_sweep_resumes_without_redoing_or_losing(tmp_path):
+    """Kill a sweep at a known point, then resume it: nothing is rendered twice, nothing is lost.
+
+    The worker of one step group (wide_slab, N = 16: K = 4, 8, 16) is held before it renders
+    (``SSLPV_SWEEP_PAUSE_CONFIG``), so the sweep cannot finish: once the other nine
+    configurations are recorded it is killed like a crash. The resumed sweep must render
+    exactly those three. The sweep runs at ``--size small``, so wide_slab is 60x36.
+    """
     out = tmp_path / "s"
-    cmd = [sys.executable, "-m", "harness.cli", "sweep", "--scenes", ",".join(SCENES), "--grid", "8,16",
-           "--steps", "4,8,16", "--size", "64x64", "--workers", "2", "--out", str(out), "--no-progress", "--json"]
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    cmd = [sys.executable, "-m", "harness.cli", "sweep", "--scenes", "thin_ring,wide_slab", "--grid", "8,16",
+           "--steps", "4,8,16", "--size", "small", "--workers", "2", "--out", str(out), "--no-progress", "--json"]
+    env = dict(os.environ, SSLPV_SWEEP_PAUSE_CONFIG="wide_slab:N16-K8-collision")
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                            env=env)
     store = out / "store.sqlite"
-    deadline = time.time() + 120
-    done = 0
-    while time.time() < deadline and done < 2:
-        time.sleep(0.5)
-        if store.exists():
-            with Store(store) as st:
-                done = len(st.done_keys(st.runs()[-1]["id"])) if st.runs() else 0
-    assert done >= 2, "the sweep recorded nothing within 120 s"
-    os.killpg(proc.pid, signal.SIGKILL)  # a crash: no chance to clean up
-    proc.wait()
+    deadline = time.time() + 240
+    done = set()
+    try:
+        while time.time() < deadline and len(done) < 9 and proc.poll() is None:
+            time.sleep(0.5)
+            if store.exists():
+                with Store(store) as st:
+                    done = st.done_keys(st.runs()[-1]["id"]) if st.runs() else set()
+        assert proc.poll() is None, f"the paused sweep ended on its own: {proc.communicate()[1][-2000:]}"
+        assert len(done) == 9, f"the sweep recorded {len(done)} of the 9 unpaused configurations within 240 s"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # a crash: no chance to clean up
+        proc.wait()
     with Store(store) as st:
-        before = st.done_keys(st.runs()[-1]["id"])
-    if len(before) == 12:
-        pytest.skip("the sweep finished before it could be killed")
+        before = st.configs(run_id=st.runs()[-1]["id"])
+    missing = {("wide_slab", 16, k) for k in (4, 8, 16)}
+    assert len(before) == 9 and not {(c["scene"], c["params"]["N"], c["params"]["steps"]) for c in before} & missing
     rerun = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert rerun.returncode == 0, rerun.stderr
     summary = json.loads(rerun.stdout)
-    assert summary["skipped_done"] == len(before)
-    assert summary["ok"] == 12 - len(before)
+    assert summary["skipped_done"] == 9 and summary["ok"] == 3 and summary["failed"] == 0
     with Store(store) as st:
-        keys = [c["config_key"] for c in st.configs()]
+        configs = st.configs()
+    keys = [c["config_key"] for c in configs]
     assert len(keys) == 12 and len(set(keys)) == 12
+    assert {(c["scene"], c["params"]["N"], c["params"]["steps"]) for c in configs} >= missing
+    wide = next(c for c in configs if c["scene"] == "wide_slab")
+    assert Path(wide["reference_dir"]).name == "wide_slab"          # the committed 60x36 reference
 
 
 class TestBadInput:

@@ -111,6 +111,27 @@ def _ok_result(result, ref, floors, group_steps):
             "shared": {"stages": list(shared), "group_steps": list(group_steps)} if shared else None}
 
 
+#: Test hook: ``SCENE:LABEL`` (e.g. ``wide_slab:N16-K8-collision``) holds the worker of the group that
+#: holds this configuration before it renders, for at most this many seconds, so that a test can kill a
+#: sweep at a known point (every other group recorded, this one not).
+PAUSE_LIMIT_S = 600.0
+
+
+def _pause_if_asked(scene_path, params, ks):
+    from pathlib import Path
+
+    from harness.runs.params import config_label
+
+    pause = os.environ.get("SSLPV_SWEEP_PAUSE_CONFIG")
+    if not pause:
+        return
+    name = Path(scene_path).name
+    if any(pause == f"{name}:{config_label(dict(params, steps=k))}" for k in ks):
+        end = time.monotonic() + PAUSE_LIMIT_S
+        while time.monotonic() < end:
+            time.sleep(0.2)
+
+
 def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=True):
     """Render one configuration per step count in ``steps_list`` (all else from ``params``) and measure each.
 
@@ -142,6 +163,7 @@ def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=Tru
 
         os.kill(os.getpid(), signal.SIGKILL)
     inject_fail = os.environ.get("SSLPV_SWEEP_FAIL_CONFIG")
+    _pause_if_asked(scene_path, params, ks)
     todo = []
     for i, k in enumerate(ks):
         if inject_fail and inject_fail == config_label(dict(params, steps=k)):
