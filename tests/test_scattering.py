@@ -48,13 +48,19 @@ def basis(w):
                      k * w[..., 0]], axis=-1)
 
 
+@functools.lru_cache(maxsize=8)
+def gauss_legendre(n):
+    """Gauss-Legendre nodes and weights on [-1, 1], computed once per n (an n x n eigenproblem)."""
+    return np.polynomial.legendre.leggauss(n)
+
+
 def hg(mu, g):
     """Henyey-Greenstein, normalised to 1 over the sphere."""
     return (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * mu) ** 1.5)
 
 
 def sphere_nodes(n_mu, n_phi):
-    mu, wmu = np.polynomial.legendre.leggauss(n_mu)
+    mu, wmu = gauss_legendre(n_mu)
     phi = (np.arange(n_phi) + 0.5) * 2.0 * np.pi / n_phi
     m, p = np.meshgrid(mu, phi, indexing="ij")
     s = np.sqrt(1.0 - m * m)
@@ -62,7 +68,7 @@ def sphere_nodes(n_mu, n_phi):
     return dirs, np.repeat(wmu, n_phi) * (2.0 * np.pi / n_phi)
 
 
-def eq2_projected(c, sp, g, n_outer=(12, 24), n_inner=(400, 8)):
+def eq2_projected(c, sp, g, n_outer=(12, 24), n_inner=(200, 8)):
     """SH coefficients of Eq. 2's I_sc for the two-band function ``c`` (4,), by quadrature."""
     c = np.asarray(c, dtype=np.float64)
     w, w_wt, i_w, scattered = _hg_integral(tuple(c), float(g), n_outer, n_inner)
@@ -75,7 +81,7 @@ def _hg_integral(c, g, n_outer, n_inner):
     """Outer nodes, weights, I(w) and int p(w.w') I(w') dw' at every outer node w."""
     c = np.asarray(c)
     w, w_wt = sphere_nodes(*n_outer)                  # outer directions and weights
-    mu, mu_wt = np.polynomial.legendre.leggauss(n_inner[0])
+    mu, mu_wt = gauss_legendre(n_inner[0])
     phi = (np.arange(n_inner[1]) + 0.5) * 2.0 * np.pi / n_inner[1]
     # a frame (t, b, w) about each outer direction
     helper = np.where(np.abs(w[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
@@ -111,11 +117,11 @@ class TestQuadrature:
     def test_converged(self):
         c = lobes()["clamped_cosine"]
         a = eq2_projected(c, 1.0, 0.8)
-        b = eq2_projected(c, 1.0, 0.8, n_outer=(16, 32), n_inner=(600, 5))
+        b = eq2_projected(c, 1.0, 0.8, n_outer=(16, 32), n_inner=(300, 5))
         np.testing.assert_allclose(a, b, atol=1e-12)
 
     def test_hg_normalised_and_mean_cosine_g(self):
-        mu, w = np.polynomial.legendre.leggauss(400)
+        mu, w = gauss_legendre(200)
         for g in G_VALUES:
             assert 2 * np.pi * np.sum(w * hg(mu, g)) == pytest.approx(1.0, abs=1e-12)
             assert 2 * np.pi * np.sum(w * mu * hg(mu, g)) == pytest.approx(g, abs=1e-12)

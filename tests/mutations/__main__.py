@@ -25,13 +25,13 @@ def main(argv=None):
         print(f"error: unknown mutation(s): {', '.join(unknown)}; see --list", file=sys.stderr)
         return 2
     chosen = [known[n] for n in args.names] if args.names else list(MUTATIONS)
-    results, wall = run_all(chosen, jobs=args.jobs,
+    results, seconds = run_all(chosen, jobs=args.jobs,
                             progress=lambda r: print(f"{r['status']:<8} {r['seconds']:6.1f} s  {r['name']}",
                                                      file=sys.stderr, flush=True))
-    print(report(results, wall))
+    print(report(results, seconds))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"wall_s": wall, "results": results}, f, indent=1)
+            json.dump({"seconds": seconds, "results": results}, f, indent=1)
     return 0 if all(r["status"] == "killed" for r in results) else 1
 
 

@@ -3,7 +3,8 @@
 One copy per parallel job (``copy_repository``: the packages, the tests, the scene suite,
 the baselines and ``pyproject.toml``; no caches). For each mutation the job writes the
 mutated file into its copy, runs ``python -m pytest -x`` on the mutation's selection with
-the copy alone on ``PYTHONPATH`` and no bytecode written, restores the file, and records:
+the copy alone on ``PYTHONPATH``, no bytecode written and one BLAS thread (the jobs run
+side by side), restores the file, and records:
 
 * ``killed``: pytest exited 1 (a test failed) -- the planted error was caught;
 * ``survived``: pytest exited 0 -- a bug in the tests;
@@ -22,6 +23,7 @@ import dataclasses
 import os
 import queue
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -118,7 +120,9 @@ def run_one(m, root, timeout=TIMEOUT_S):
     """Apply ``m`` in the copy ``root``, run its tests, restore; returns a result dict."""
     original = m.apply(root)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTEST_ADDOPTS")}
-    env.update(PYTHONPATH=str(root), PYTHONDONTWRITEBYTECODE="1")
+    # one BLAS thread per test process: the jobs already run side by side, one per core
+    env.update(PYTHONPATH=str(root), PYTHONDONTWRITEBYTECODE="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
+               MKL_NUM_THREADS="1")
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "--no-header", "-rf",
            "-o", "addopts=", *m.tests]
     t0 = time.perf_counter()
@@ -141,10 +145,15 @@ def run_one(m, root, timeout=TIMEOUT_S):
 
 
 def run_all(mutations, jobs=2, root=REPO, progress=None):
-    """Run every mutation (``jobs`` at a time, one repository copy per job); returns (results, wall seconds)."""
+    """Run every mutation (``jobs`` at a time, one repository copy per job); returns (results, seconds).
+
+    ``seconds`` is ``{"wall": ..., "cpu": ...}``: the wall time, and the CPU time (user + system)
+    of the test processes, which does not depend on what else the machine runs.
+    """
     mutations = list(mutations)
     check(mutations, root)
     t0 = time.perf_counter()
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     tmp = Path(tempfile.mkdtemp(prefix="sslpv-mutations-"))
     try:
         copies = queue.Queue()
@@ -165,15 +174,17 @@ def run_all(mutations, jobs=2, root=REPO, progress=None):
             results = list(pool.map(job, mutations))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return results, time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return results, {"wall": round(time.perf_counter() - t0, 1), "cpu": round(cpu, 1)}
 
 
-def report(results, wall_s):
+def report(results, seconds):
     """Kill rate, every survivor and error, and one line per mutation."""
     killed = [r for r in results if r["status"] == "killed"]
     bad = [r for r in results if r["status"] != "killed"]
     lines = [f"mutation suite: {len(killed)}/{len(results)} killed ({100.0 * len(killed) / max(len(results), 1):.1f} %)"
-             f" in {wall_s:.1f} s"]
+             f" in {seconds['wall']:.1f} s wall, {seconds['cpu']:.1f} s CPU of the test processes"]
     for r in bad:
         lines.append(f"  {r['status'].upper()}: {r['name']} ({r['kind']}): {r['what']}; tests {' '.join(r['tests'])}"
                      + (f"; {r['line']}" if r["line"] else ""))
