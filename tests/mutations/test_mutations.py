@@ -6,8 +6,8 @@
 * ``test_every_planted_error_is_caught``: applies each to a temporary copy of the
   repository, runs its tests there and requires them to fail. It prints the kill rate,
   every survivor and the line each test failed with, and writes
-  ``test-artifacts/mutations/report.txt`` and ``report.json``. Cost: 82 s of CPU (two
-  mutations at a time; 202 s wall on this 2-core machine while other jobs loaded it).
+  ``test-artifacts/mutations/report.txt`` and ``report.json``. Cost: 77-82 s of CPU (two
+  mutations at a time; 133-202 s wall on this 2-core machine while other jobs loaded it).
 """
 
 import json
