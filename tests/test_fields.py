@@ -11,7 +11,9 @@ position, layers cycle their values every ``period`` from the low face, veins ar
 import numpy as np
 import pytest
 
-from harness.scene.fields import evaluate_field, voxel_centres
+from pydantic import TypeAdapter
+
+from harness.scene.fields import FieldSpec, evaluate_field, voxel_centres
 
 LO, HI = np.array([-1.0, 0.0, 2.0]), np.array([3.0, 2.0, 4.0])
 RES = (4, 2, 8)                                   # nx, ny, nz
@@ -22,7 +24,9 @@ AXIS = {"x": 0, "y": 1, "z": 2}
 
 
 def field(spec):
-    return evaluate_field(spec, RES, LO, HI, "test.toml", "medium.sigma_t", None).astype(np.float64)
+    """The field of a ``[medium]`` table (validated by the scene model's own FieldSpec) on the test grid."""
+    model = TypeAdapter(FieldSpec).validate_python(spec)
+    return evaluate_field(model, RES, LO, HI, "sigma_t", None).astype(np.float64)
 
 
 def along(grid, axis):
