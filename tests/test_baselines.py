@@ -61,12 +61,14 @@ class TestValidation:
         return baselines.find_entry(baselines.read_baseline(scene), [64, 64], SSLPVParams(N=16, steps=8).as_dict())
 
     def test_committed_images_exist_for_every_accuracy_case(self):
-        from harness.regression.accuracy import cases
+        from harness.regression.accuracy import cases, small_scene
         from harness.runs.params import config_label
 
         for scene, params, _ in cases():
-            e = baselines.find_entry(baselines.read_baseline(scene), [64, 64], params.as_dict())
-            assert e is not None and e["image"] == baselines.image_name(scene, config_label(params), [64, 64])
+            cam = small_scene(scene).camera                  # 64x64; a non-square scene keeps its aspect
+            size = [cam.width, cam.height]
+            e = baselines.find_entry(baselines.read_baseline(scene), size, params.as_dict())
+            assert e is not None and e["image"] == baselines.image_name(scene, config_label(params), size)
             assert e["gl_renderer"] and (baselines.BASELINE_DIR / e["image"]).is_file()
         img, mask = baselines.committed_image("thin_ring", self._entry())
         assert img.shape == (64, 64, 3) and mask.dtype == bool and mask.any()
@@ -75,8 +77,8 @@ class TestValidation:
         e = self._entry()
         (sandbox / e["image"]).unlink()
         with pytest.raises(InputError, match=r"images/thin_ring/N16-K8-collision-64x64\.exr: file: the committed "
-                                             r"SSLPV image of thin_ring N16-K8-collision is missing; run a 64x64 "
-                                             r"sweep .*baselines update"):
+                                             r"SSLPV image of thin_ring N16-K8-collision is missing; run a `sweep "
+                                             r"--size small` .*baselines update"):
             baselines.committed_image("thin_ring", e)
 
     def test_committed_image_of_the_wrong_size(self, sandbox):
@@ -85,7 +87,7 @@ class TestValidation:
         e = self._entry()
         write_exr(sandbox / e["image"], np.zeros((32, 32, 3)), extra={"mask": np.ones((32, 32))})
         with pytest.raises(InputError, match=r"N16-K8-collision-64x64\.exr: size: is 32x32, the baseline entry "
-                                             r"is 64x64; run a 64x64 sweep"):
+                                             r"is 64x64; run a `sweep --size small`"):
             baselines.committed_image("thin_ring", e)
 
     def test_reference_without_standard_error(self, sandbox):

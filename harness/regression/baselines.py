@@ -159,7 +159,7 @@ def image_name(scene_name, label, size):
 
 def update_command(scene_name=None):
     """The one-line command that accepts new values and images (for messages)."""
-    return ("run a 64x64 sweep of baselines/accuracy_matrix.toml and `sslpv-harness baselines update "
+    return ("run a `sweep --size small` of baselines/accuracy_matrix.toml and `sslpv-harness baselines update "
             f"--store STORE{' --scene ' + scene_name if scene_name else ''}`")
 
 
