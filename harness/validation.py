@@ -30,11 +30,11 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import annotated_types
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, WrapValidator
 
 from harness.errors import InputError
 
-__all__ = ["InputModel", "FieldProblem", "Vec3", "Positive", "NonNegative", "ImageSize", "MAX_IMAGE_SIZE",
+__all__ = ["InputModel", "FieldProblem", "Vec3", "Positive", "NonNegative", "ImageSize", "SweepSize", "MAX_IMAGE_SIZE",
            "read_toml", "read_json", "validate", "input_error", "field_names", "INPUT_CONFIG"]
 
 #: Largest image width or height anywhere (scene cameras, ``--size``, matrices).
@@ -72,6 +72,16 @@ Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
 ImageSize = Annotated[int, Field(ge=1, le=MAX_IMAGE_SIZE)]
+
+
+def _small_or_size(value, handler):
+    # "small" passes as it is; anything else must be a [W, H] size, and its errors are the list's own
+    return "small" if value == "small" else handler(value)
+
+
+#: The image size of a sweep or a matrix: ``[W, H]``, or ``"small"`` (each scene at its committed
+#: small size, :func:`harness.reference.committed.small_size`).
+SweepSize = Annotated[list[ImageSize], Field(min_length=2, max_length=2), WrapValidator(_small_or_size)]
 
 
 # --------------------------------------------------------------------------- reading files

@@ -40,3 +40,22 @@ def test_parse_size():
     assert parse_size("160x96") == [160, 96] and parse_size(None) is None
     with pytest.raises(InputError, match="or small"):
         parse_size("64")
+
+
+def test_small_in_sweep_json_and_nightly_matrix(tmp_path):
+    """``size = "small"`` is a valid size of a sweep.json and of a nightly matrix; other sizes keep their rules."""
+    import json
+
+    from harness.regression.nightly import load_matrix
+    from harness.runs.sweep import SweepConfig
+
+    cfg = SweepConfig(scenes=["wide_slab"], params={"N": [8]}, out=str(tmp_path / "o"), size="small")
+    path = tmp_path / "sweep.json"
+    path.write_text(cfg.to_json())
+    assert json.loads(path.read_text())["size"] == "small" and SweepConfig.from_file(path).size == "small"
+    path.write_text(cfg.to_json().replace('"small"', '"tiny"'))
+    with pytest.raises(InputError, match="size"):
+        SweepConfig.from_file(path)
+    m = tmp_path / "m.toml"
+    m.write_text('scenes = ["wide_slab"]\nsize = "small"\n[params]\ngrid = [8]\n')
+    assert load_matrix(m)["size"] == "small"

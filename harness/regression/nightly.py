@@ -35,7 +35,7 @@ from harness.errors import InputError
 from harness.runs.params import check_products, config_label, param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
 from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, image_change, judge_images, overall
-from harness.validation import ImageSize, InputModel, read_toml, validate
+from harness.validation import InputModel, SweepSize, read_toml, validate
 
 TEMPLATES = Path(__file__).resolve().parent / "nightly_templates"
 
@@ -48,7 +48,7 @@ class NightlyMatrix(InputModel):
 
     scenes: Union[Literal["all"], Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]] = Field(
         "all", description='"all", or a list of suite scene names', examples=[["thin_ring", "jade_veins"]])
-    size: Optional[Union[Literal["small"], Annotated[list[ImageSize], Field(min_length=2, max_length=2)]]] = Field(
+    size: Optional[SweepSize] = Field(
         None, description='image size [W, H], or "small" (each scene at its committed small size, its own aspect); '
         "default: each scene's own", examples=[[128, 128], "small"])
     params: _PRODUCT = Field(default_factory=_PRODUCT, description="every combination is rendered")

@@ -74,7 +74,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Annotated, Literal, Optional, Union
+from typing import Annotated, Optional, Union
 
 import numpy as np
 from dask.distributed import WorkerPlugin
@@ -86,7 +86,7 @@ from harness.io.outputs import check_sweep_folder, check_writable, claim_sweep_f
 from harness.errors import EnvironmentProblem, InputError
 from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, config_label, expand, \
     param_lists_model, parse_lists, product_dict
-from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, ImageSize, read_json, validate
+from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, SweepSize, read_json, validate
 
 from harness.reference.committed import sized_scene
 from harness.scene import list_scenes, load_scene, scene_path
@@ -125,8 +125,7 @@ class SweepConfig:
     params: Union[_PRODUCT, list[_PRODUCT]]  # SSLPVParams field -> list of values (or a list of such products)
     out: str                                 # output folder
     store: str = ""                          # results store (default OUT/store.sqlite)
-    # [W, H]; "small": each scene at its committed small size (its own aspect); None: the scene's own
-    size: Optional[Union[Literal["small"], Annotated[list[ImageSize], Field(min_length=2, max_length=2)]]] = None
+    size: Optional[SweepSize] = None         # [W, H]; "small": each scene's committed size; None: the scene's own
     kind: str = "sweep"                      # run kind in the store
     reference_target: Optional[Annotated[float, Field(gt=0, lt=1)]] = None  # median rel. SE asked of references
 
