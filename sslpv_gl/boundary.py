@@ -76,11 +76,28 @@ import numpy as np
 
 from .optics import fresnel_reflectance
 
-__all__ = ["OUTSIDE_MODES", "diffuse_fresnel_reflectance", "egan_hilgeman_fdr", "a_of_eta",
+__all__ = ["OUTSIDE_MODES", "diffuse_fresnel_reflectance", "fresnel_moment", "egan_hilgeman_fdr", "a_of_eta",
            "extrapolation_distance", "outside_masks"]
 
 #: ``outside`` choices, in the order of the table above.
 OUTSIDE_MODES = ("vacuum", "material", "absorb", "extrapolated")
+
+
+def _moment_nodes(eta, order):
+    """Gauss-Legendre nodes on ``[mu_c, 1]`` for the Fresnel moments of light arriving from inside.
+
+    Returns ``(mu_c, mu, r, wts)``: the critical cosine ``sqrt(1 - 1/eta^2)`` (0 for
+    ``eta <= 1``), the nodes, ``R(-mu; eta)`` there and the weights, each with a
+    leading node axis and then ``eta``'s shape.
+    """
+    x, w = np.polynomial.legendre.leggauss(int(order))
+    eta = np.asarray(eta, dtype=np.float64)
+    mu_c = np.sqrt(np.clip(1.0 - 1.0 / eta**2, 0.0, 1.0))
+    half = 0.5 * (1.0 - mu_c)
+    mu = mu_c[None] + half[None] * (x.reshape((-1,) + (1,) * eta.ndim) + 1.0)   # nodes on [mu_c, 1]
+    r = fresnel_reflectance(-mu, eta[None])          # negative cos: light from inside
+    wts = w.reshape((-1,) + (1,) * eta.ndim) * half[None]
+    return mu_c, mu, r, wts
 
 
 def diffuse_fresnel_reflectance(eta, order=64):
@@ -92,14 +109,20 @@ def diffuse_fresnel_reflectance(eta, order=64):
     integrated by Gauss-Legendre quadrature with ``order`` nodes (splitting at the
     kink makes it accurate to ~1e-12). 0 for ``eta == 1``.
     """
-    x, w = np.polynomial.legendre.leggauss(int(order))
-    eta = np.asarray(eta, dtype=np.float64)
-    mu_c = np.sqrt(np.clip(1.0 - 1.0 / eta**2, 0.0, 1.0))
-    half = 0.5 * (1.0 - mu_c)
-    mu = mu_c[None] + half[None] * (x.reshape((-1,) + (1,) * eta.ndim) + 1.0)   # nodes on [mu_c, 1]
-    r = fresnel_reflectance(-mu, eta[None])          # negative cos: light from inside
-    wts = w.reshape((-1,) + (1,) * eta.ndim) * half[None]
+    mu_c, mu, r, wts = _moment_nodes(eta, order)
     return mu_c**2 + np.sum(wts * 2.0 * mu * r, axis=0)
+
+
+def fresnel_moment(eta, n, order=64):
+    """``C_n(eta) = int_0^1 R(-mu; eta) mu^n dmu``, the n-th Fresnel moment for light from inside.
+
+    The same split quadrature as :func:`diffuse_fresnel_reflectance` (``F_dr = 2 C_1``);
+    the totally reflected part ``[0, mu_c]`` contributes ``mu_c^(n+1) / (n+1)``.
+    The directional dipole (Frisvad et al. 2014) uses ``C_1`` and ``C_2``
+    (``dipole_gl.kernels``).
+    """
+    mu_c, mu, r, wts = _moment_nodes(eta, order)
+    return mu_c ** (n + 1) / (n + 1) + np.sum(wts * mu**n * r, axis=0)
 
 
 def egan_hilgeman_fdr(eta):

@@ -21,6 +21,10 @@
      - per light: injection RSM (``inject_size``^2: position, normal,
        ``Phi_p = I dOmega_p``) and a tile of the shadow-map atlas
        (``rsm_size``^2), same frustum
+   * - :func:`render_shadow_atlas`
+     - Sec. 3.3 (direct light)
+     - ``rsm.vert/frag``
+     - the shadow-map atlas alone (also the dipole rivals' visibility)
    * - :func:`read_texels`
      - Sec. 3.1
      - --
@@ -57,7 +61,8 @@ import numpy as np
 from . import shaders as _sh
 
 __all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view", "light_views",
-           "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG", "build_program", "render_maps", "read_texels"]
+           "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG", "build_program", "render_maps",
+           "render_shadow_atlas", "read_texels"]
 
 #: Upper bound of the RSM half field of view (a light inside the bounding
 #: sphere would otherwise need a frustum wider than 180 degrees).
@@ -193,15 +198,26 @@ def render_maps(ctx, prog, vao, targets, scene, params, views):
         t.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         _draw_light(prog, vao, ctx, light, view, (0, 0, size, size))
         maps.append(t.textures)
-    s, n = params.rsm_size, len(scene.lights)
-    shadow = targets.get("shadow", (s * n, s), 1)
+    return maps, render_shadow_atlas(ctx, prog, vao, targets, scene, params.rsm_size, views)
+
+
+def render_shadow_atlas(ctx, prog, vao, targets, scene, size, views, slot="shadow"):
+    """The shadow-map atlas: one ``size``^2 tile per light, side by side, holding the world
+    position seen from the light (w = valid) -> the texture (``shadow.glsl`` reads it).
+
+    ``prog``/``vao`` as in :func:`render_maps`; also used by the dipole rivals (``dipole_gl``).
+    """
+    ctx.disable(ctx.BLEND)
+    ctx.enable(ctx.DEPTH_TEST)
+    s, n = int(size), len(scene.lights)
+    shadow = targets.get(slot, (s * n, s), 1)
     shadow.fbo.use()
     shadow.fbo.viewport = (0, 0, s * n, s)
     shadow.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
     for i, (light, view) in enumerate(zip(scene.lights, views)):
         shadow.fbo.viewport = (i * s, 0, s, s)
         _draw_light(prog, vao, ctx, light, view, (i * s, 0, s, s))
-    return maps, shadow.textures[0]
+    return shadow.textures[0]
 
 
 def read_texels(maps):
