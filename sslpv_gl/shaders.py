@@ -37,9 +37,9 @@ def _expand(path, seen, dirs):
 
 
 def load_source(name, defines=None, dirs=(SHADER_DIR,)):
-    """Source of ``<dirs[0]>/<name>`` with includes expanded and ``defines`` added."""
+    """Source of ``<dir>/<name>`` (the first of ``dirs`` that has it) with includes expanded and ``defines`` added."""
     dirs = tuple(Path(d) for d in dirs)
-    path = dirs[0] / name
+    path = next((d / name for d in dirs if (d / name).is_file()), dirs[0] / name)
     text = _expand(path, {path}, dirs)
     lines = text.splitlines()
     if not lines or not lines[0].startswith("#version"):

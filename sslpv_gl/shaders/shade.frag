@@ -9,6 +9,7 @@
 #include "sh.glsl"
 #include "optics.glsl"
 #include "shadow.glsl"
+#include "reflection.glsl"
 
 in vec3 v_pos;
 in vec3 v_nrm;
@@ -22,10 +23,7 @@ uniform int   u_N;
 uniform float u_area;           // A = dx^2 (Eq. 5)
 uniform float u_eta;            // 1 = index-matched (null boundary)
 uniform float u_sub_scale;      // 1, or 1/eta^2 with params.eta2 (radiance leaving a medium; not in Eq. 4)
-uniform float u_alpha;          // GGX roughness
 uniform vec3  u_cam_pos;
-uniform int   u_n_lights;       // 0 for index-matched: no surface reflection
-uniform vec3  u_light_I[MAX_LIGHTS];
 
 layout(location = 0) out vec4 out_full;      // rgb, a = coverage
 layout(location = 1) out vec4 out_sub;       // rgb, a = coverage
@@ -54,17 +52,7 @@ void main()
                         sh_hemisphere_radiance(grid_lookup(u_acc_b, v_pos), n, u_area));
 
     // ---- direct reflection off a dielectric boundary (none when index-matched)
-    vec3 refl = vec3(0.0);
-    for (int i = 0; i < u_n_lights; ++i) {
-        vec3 to_l = u_light_pos[i] - v_pos;
-        float d2 = dot(to_l, to_l);
-        vec3 wi = to_l * inversesqrt(d2);
-        float cos_i = dot(wi, n);
-        if (cos_i <= 0.0) continue;
-        float f = ggx_reflection(wi, wo, n, u_alpha, u_eta);
-        if (f <= 0.0) continue;
-        refl += u_light_I[i] / d2 * (f * cos_i * shadow_visibility(i, v_pos, n));
-    }
+    vec3 refl = direct_reflection(v_pos, n, wo, u_eta);
 
     out_full = vec4(sub + refl, 1.0);
     out_sub  = vec4(sub, 1.0);
