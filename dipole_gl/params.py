@@ -1,0 +1,105 @@
+"""Every parameter of the dipole rivals, with its default, in one place.
+
+:class:`DipoleParams` is a frozen dataclass; each field carries a one-line description
+(``DipoleParams.doc(name)``, the command line's help). A parameter that belongs to one
+gather only is ``None`` for the other (``as_dict()`` leaves it out), so a configuration
+never carries a setting that does nothing. Bad values raise
+:class:`harness.errors.InputError` with one line naming the command-line flag.
+
+=================  =========  ==========================================================
+field              gather     meaning
+=================  =========  ==========================================================
+``gather``         both       ``dense`` (whole surface) or ``vertex`` (Hao & Varshney)
+``spacing``        dense      surface sample spacing, in reduced mean free paths
+                              ``l' = 1/sigma_t'`` (default 1)
+``range``          vertex     neighbourhood radius, in diffusion lengths ``1/sigma_tr``
+                              (default 4)
+``density``        vertex     scattering vertices per ``l'^2`` (default 1)
+``shadow_size``    both       shadow-map resolution per light (default 1024)
+=================  =========  ==========================================================
+
+``l'`` is the smallest reduced mean free path of the medium (largest ``sigma_t'`` over
+colours and the voxels inside the mesh) and ``1/sigma_tr`` the largest diffusion length,
+so a setting is at least as fine, and a range at least as wide, in every colour.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+from harness.errors import InputError
+
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "GATHER_FIELDS", "DEFAULTS"]
+
+KERNELS = ("dipole", "dirpole")
+GATHERS = ("dense", "vertex")
+#: gather -> the parameters that belong to it alone, with their defaults
+GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0}}
+DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
+
+
+def _p(default, doc):
+    return field(default=default, metadata={"doc": doc})
+
+
+@dataclass(frozen=True)
+class DipoleParams:
+    """Settings of the ``dipole`` and ``dirpole`` methods (see the module docstring)."""
+
+    gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling) "
+                              "or vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors)")
+    spacing: float | None = _p(None, "gather=dense: sample spacing in reduced mean free paths 1/sigma_t' "
+                                     "(default 1), in [0.05, 10]")
+    range: float | None = _p(None, "gather=vertex: effective scattering range in diffusion lengths 1/sigma_tr "
+                                   "(default 4), in (0, 100]")
+    density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
+                                     "(default 1), in [0.01, 100]")
+    shadow_size: int = _p(1024, "shadow-map resolution per light (visibility of the irradiance), in [16, 8192]")
+
+    def __post_init__(self):
+        def bad(name, problem, fix):
+            raise InputError("--" + name.replace("_", "-"), name, problem, fix)
+
+        if self.gather not in GATHERS:
+            bad("gather", f"unknown gather {self.gather!r}", "use one of: " + ", ".join(GATHERS))
+        mine = GATHER_FIELDS[self.gather]
+        for g, names in GATHER_FIELDS.items():
+            for name in names:
+                v = getattr(self, name)
+                if g != self.gather and v is not None:
+                    bad(name, f"belongs to gather={g}, not gather={self.gather}",
+                        f"drop --{name} or use --gather {g}")
+        for name, default in mine.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, default)
+        limits = {"spacing": (0.05, 10.0, True), "range": (0.0, 100.0, False), "density": (0.01, 100.0, True)}
+        for name in mine:
+            v = getattr(self, name)
+            lo, hi, lo_closed = limits[name]
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and \
+                (v >= lo if lo_closed else v > lo) and v <= hi
+            if not ok:
+                bad(name, f"must be a number in {'[' if lo_closed else '('}{lo:g}, {hi:g}], got {v!r}",
+                    "change the value")
+            object.__setattr__(self, name, float(v))
+        v = self.shadow_size
+        if isinstance(v, bool) or not isinstance(v, int) or not 16 <= v <= 8192:
+            bad("shadow_size", f"must be an integer in [16, 8192], got {v!r}", "change the value")
+
+    @staticmethod
+    def doc(name):
+        """The one-line description of a field."""
+        return {f.name: f.metadata["doc"] for f in dataclasses.fields(DipoleParams)}[name]
+
+    @staticmethod
+    def field_types():
+        return {f.name: f.type for f in dataclasses.fields(DipoleParams)}
+
+    def as_dict(self):
+        """The settings that apply (a parameter of the other gather is left out)."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    def replace(self, **changes):
+        return dataclasses.replace(self, **changes)
