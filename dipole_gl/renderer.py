@@ -65,7 +65,7 @@ from . import gbuffer, irradiance, shade
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
 from .params import KERNELS, DipoleParams
-from .sampling import N_PHI, radial_nodes, surface_samples
+from .sampling import MAX_FRAME_PAIRS, N_PHI, radial_nodes, surface_samples
 from .timing import StageTimer, warm_up_queries
 from .vertex import precompute as vertex_precompute
 
@@ -227,6 +227,12 @@ class DipoleRenderer:
         if params.gather == "dense":
             entry = self._dense_points(scene, mat, params.spacing)
             points = entry.value
+            if W * H * points.count > MAX_FRAME_PAIRS:
+                from harness.errors import InputError
+
+                raise InputError("--spacing", "spacing", f"the dense gather would pair {W * H:,} pixels with "
+                                 f"{points.count:,} surface samples (over {MAX_FRAME_PAIRS:,} per frame)",
+                                 "raise --spacing or render a smaller image")
             pre_ms["sampling"], pre_work["sampling"] = entry.ms, entry.work
             gb = self._targets.get("dipole_gbuffer", (W, H), 5)
             with timer.stage("gbuffer"):

@@ -26,10 +26,12 @@ import numpy as np
 from harness.errors import InputError
 
 __all__ = ["surface_samples", "MAX_SAMPLES", "subdivision_barycentrics", "radial_nodes", "window", "NEAR_RADIUS",
-           "N_PHI"]
+           "N_PHI", "MAX_FRAME_PAIRS"]
 
 #: A dense gather with more samples than this is refused (the fix: a larger ``--spacing``).
 MAX_SAMPLES = 2_000_000
+#: A dense gather that would evaluate more (pixel, sample) pairs per frame than this is refused.
+MAX_FRAME_PAIRS = 2_000_000_000
 #: The near-field radius, in sample spacings ``h``.
 NEAR_RADIUS = 3.0
 #: Angles of the near-field quadrature (the trapezoid rule, exact for trigonometric polynomials of degree < 16).

@@ -14,6 +14,8 @@ def configure(sp):
     sp.add_argument("--out", type=Path, default=paths.REPO / "reports" / "nightly", help="reports folder")
     sp.add_argument("--date", help="night's date, YYYY-MM-DD (default: today)")
     sp.add_argument("--scheduler", help="address of an existing Dask scheduler")
+    sp.add_argument("--method", help="comma-separated methods: run only the matrix's products of these "
+                                     "(sslpv | dipole | dirpole; default: every product of the matrix)")
 
 
 def run(args):

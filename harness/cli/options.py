@@ -45,3 +45,21 @@ def add_sslpv_args(sp, multi):
     sp.add_argument("--radiance-scale", dest="radiance_scale", help=f"{kind}factor on the subsurface radiance")
     sp.add_argument("--converge-tol", dest="converge_tol", help=f"{kind}steps=auto: remaining flux fraction to stop at")
     sp.add_argument("--max-steps", dest="max_steps", help=f"{kind}steps=auto: step cap")
+
+
+def add_method_args(sp, multi):
+    """``--method`` and the parameters of every method other than SSLPV (``harness.methods``), from their docs."""
+    from harness.methods import METHOD_NAMES, get_method
+
+    kind = "comma-separated list of " if multi else ""
+    sp.add_argument("--method", help=f"{kind}method: {' | '.join(METHOD_NAMES)} (default sslpv); each method takes "
+                                     "only its own parameters")
+    seen = set(get_method("sslpv").cli)
+    for name in METHOD_NAMES:
+        m = get_method(name)
+        for cli, field in m.cli.items():
+            if cli in seen:
+                continue
+            seen.add(cli)
+            owners = ", ".join(n for n in METHOD_NAMES if cli in get_method(n).cli)
+            sp.add_argument("--" + cli.replace("_", "-"), dest=cli, help=f"{kind}[{owners}] {m.doc(field)}")

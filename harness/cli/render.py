@@ -1,21 +1,29 @@
-"""``sslpv-harness render SCENE --grid N --steps K ... --out DIR``: one SSLPV render."""
+"""``sslpv-harness render SCENE [--method M] --grid N --steps K ... --out DIR``: one render of one method."""
 
 from pathlib import Path
 
-from harness.cli.options import add_sslpv_args
+from harness.cli.options import add_method_args, add_sslpv_args
 
-HELP = "render a scene with the SSLPV GLSL renderer"
+HELP = "render a scene with one method (default: the SSLPV GLSL renderer)"
 
 
 def configure(sp):
     sp.add_argument("scene", help="suite scene name or path")
     sp.add_argument("--out", type=Path, required=True, help="output folder")
     add_sslpv_args(sp, multi=False)
+    add_method_args(sp, multi=False)
 
 
 def run(args):
-    from harness.runs.params import params_from_cli
+    from harness.methods import parse_methods
+    from harness.methods.params import all_cli_names, params_from_cli
     from harness.runs.render import run_render
 
-    params = params_from_cli(vars(args))
-    return run_render(args.scene, args.out, params, as_json=args.json), None, 0
+    methods = parse_methods(args.method)
+    if len(methods) != 1:
+        from harness.errors import InputError
+
+        raise InputError("--method", "method", f"render takes one method, got {len(methods)}", "use 'sweep' for lists")
+    values = vars(args)
+    params = params_from_cli(methods[0], {k: values.get(k) for k in all_cli_names()})
+    return run_render(args.scene, args.out, params, as_json=args.json, method=methods[0]), None, 0

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from harness.cli.options import add_sslpv_args, positive_int
+from harness.cli.options import add_method_args, add_sslpv_args, positive_int
 
 HELP = "render every SSLPV configuration of a sweep and store its metrics"
 
@@ -18,6 +18,7 @@ def configure(sp):
                     "small size, same aspect); default: the scene's")
     sp.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_sslpv_args(sp, multi=True)
+    add_method_args(sp, multi=True)
 
 
 def run(args):

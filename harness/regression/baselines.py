@@ -205,7 +205,8 @@ def _rows_from_store(store_path, scene=None):
         if not runs:
             raise InputError(store_path, "runs", "the store holds no configurations", "run a sweep first")
         configs = st.configs(run_id=runs[-1]["id"], scene=scene)
-    return [c for c in configs if c["status"] == "ok"], runs[-1]
+    # the baselines are SSLPV's (another method's configurations, harness.methods, have none)
+    return [c for c in configs if c["status"] == "ok" and c.get("method", "sslpv") == "sslpv"], runs[-1]
 
 
 def _size_of(config):

@@ -32,7 +32,8 @@ import numpy as np
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.io.outputs import check_nightly_folder
 from harness.errors import InputError
-from harness.runs.params import check_products, config_label, param_lists_model, product_dict
+from harness.methods import config_label as method_label
+from harness.runs.params import any_product_model, check_products, config_label, param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
 from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, image_change, judge_images, overall
 from harness.validation import InputModel, SweepSize, read_toml, validate
@@ -52,7 +53,8 @@ class NightlyMatrix(InputModel):
         None, description='image size [W, H], or "small" (each scene at its committed small size, its own aspect); '
         "default: each scene's own", examples=[[128, 128], "small"])
     params: _PRODUCT = Field(default_factory=_PRODUCT, description="every combination is rendered")
-    also: list[_PRODUCT] = Field([], description="further products, as [[also]] tables")
+    also: list[any_product_model("cli")] = Field([], description="further products, as [[also]] tables; "
+                                                     'method = "dipole" (or "dirpole") makes a rival\'s')
     tolerance: ToleranceSpec = Field(default_factory=ToleranceSpec)
 
 
@@ -65,14 +67,51 @@ def load_matrix(path):
     m = validate(NightlyMatrix, read_toml(path, "a matrix file", "give the nightly matrix file "
                                                 "(harness/regression/nightly_matrix.toml)"), path)
     scenes = list_scenes() if m.scenes == "all" else resolve_scenes(m.scenes, where=path, field="scenes")
-    products = [product_dict(t) for t in [m.params, *m.also]]
-    for i, lists in enumerate(products):
-        # a relative calibrated:PATH stays as written (portable labels and baselines); it is found from the
-        # current folder or the repository (sslpv_gl.calibrated.resolve_path), and checked now
-        check_products(lists, path, "params" if i == 0 else f"also[{i - 1}]")
-    params = products if m.also else products[0]
+    products = []
+    for i, table in enumerate([m.params, *m.also]):
+        where = "params" if i == 0 else f"also[{i - 1}]"
+        for lists in _split_methods([product_dict(table)], path, where):
+            # a relative calibrated:PATH stays as written (portable labels and baselines); it is found from the
+            # current folder or the repository (sslpv_gl.calibrated.resolve_path), and checked now
+            check_products(lists, path, where)
+            products.append(lists)
+    params = products if len(products) > 1 else products[0]
     return {"scenes": scenes, "params": params, "size": m.size, "tolerance": m.tolerance.over(DEFAULT_TOLERANCE),
             "path": str(path)}
+
+
+def _split_methods(products, path, where):
+    """Another method's product split as that method does it (the dipole rivals: one per gather, with the
+    parameters that belong to each); SSLPV's products as they are."""
+    from harness.methods import get_method
+
+    out = []
+    for lists in products:
+        name = lists.get("method", "sslpv")
+        if name == "sslpv":
+            out.append(lists)
+            continue
+        try:
+            parts = get_method(name).split_products({k: v for k, v in lists.items() if k != "method"})
+        except InputError as exc:
+            raise InputError(path, f"{where}.{exc.field}", exc.problem, exc.fix) from None
+        out += [{"method": name, **p} for p in parts]
+    return out
+
+
+def select_methods(params, methods):
+    """Only the products of ``methods`` (``nightly --method``); SSLPV's products name no method."""
+    items = params if isinstance(params, list) else [params]
+    keep = [p for p in items if p.get("method", "sslpv") in methods]
+    if not keep:
+        raise InputError("--method", "method", f"the matrix has no products of {', '.join(methods)}",
+                         "add an [[also]] table with method = ... to the matrix, or change --method")
+    return keep
+
+
+def _label(c):
+    """A stored configuration's label, whatever its method (``harness.methods``)."""
+    return method_label(c.get("method", "sslpv"), c["params"])
 
 
 def _render_images(render_dir):
@@ -121,11 +160,11 @@ def judge_night(store, run_id, prev_run_id, references, scenes, size, tolerance,
         for c in store.configs(run_id=prev_run_id):
             if c["status"] == "ok":
                 prev_by_key[c["config_key"]] = c
-                prev_by_label[(c["scene"], config_label(c["params"]))] = c
+                prev_by_label[(c["scene"], _label(c))] = c
     base = _baseline_images(scenes, size)
     # Plan every pair first: the Bonferroni family is every comparison the night can judge.
     for c in now:
-        label = config_label(c["params"])
+        label = _label(c)
         p = prev_by_key.get(c["config_key"])
         if p is None and (c["scene"], label) in prev_by_label:
             old_hash = prev_by_label[(c["scene"], label)]["scene_hash"]
@@ -145,7 +184,7 @@ def judge_night(store, run_id, prev_run_id, references, scenes, size, tolerance,
             pairs.append(("baseline", c, base[(c["scene"], label)]))
     loaded, refs, rows, changes, todo = {}, {}, [], [], []
     for against, c, old in pairs:
-        label = config_label(c["params"])
+        label = _label(c)
         new = loaded.get(c["render_dir"]) or _render_images(c["render_dir"])
         loaded[c["render_dir"]] = new
         if new is None:
@@ -210,18 +249,21 @@ def trend_plots(store, night_run_ids, out_dir):
             if c["status"] != "ok":
                 continue
             p = c["params"]
+            method = c.get("method", "sslpv")
             for metric in HEADLINE:
                 m = c["metrics"].get("subsurface", {}).get(metric)
                 if m is not None:
                     key = (c["scene"], metric)
-                    line = (p.get("mapping"), p.get("N"), p.get("steps"))
+                    # another method: its own panel, one line per configuration (N 0, its label as "steps")
+                    line = (p.get("mapping"), p.get("N"), p.get("steps")) if method == "sslpv" else \
+                        (f"method {method}", 0, method_label(method, p))
                     series.setdefault(key, {}).setdefault(line, []).append((night, badness(metric, m["value"])))
     styles = ["-", "--", ":", "-."]
     out = []
     for (scene, metric), lines in sorted(series.items()):
         mappings = sorted({k[0] for k in lines})
         grids = sorted({k[1] for k in lines})
-        steps = sorted({k[2] for k in lines})
+        steps = sorted({k[2] for k in lines}, key=lambda k: (isinstance(k, str), str(k) if isinstance(k, str) else k))
         fig, axes = plt.subplots(1, len(mappings), figsize=(4.2 * len(mappings) + 1.6, 3.4), squeeze=False,
                                  sharey=True)
         for ax, mapping in zip(axes[0], mappings):
@@ -230,7 +272,7 @@ def trend_plots(store, night_run_ids, out_dir):
                     continue
                 colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
                 ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
-                        color=colour, ls=styles[steps.index(k) % len(styles)], label=f"N{n} K{k}")
+                        color=colour, ls=styles[steps.index(k) % len(styles)], label=f"N{n} K{k}" if n else str(k))
             ax.set_yscale("log")
             ax.set_title(f"mapping={mapping}", fontsize=9)
             ax.tick_params(axis="x", labelrotation=30, labelsize=7)
@@ -265,12 +307,17 @@ def write_index(out_root):
     return Path(out_root) / "index.html"
 
 
-def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True):
+def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True,
+                methods=None):
     from harness.progress import Progress
     from harness.runs.sweep import SweepConfig, run_sweep
     from harness.store import Store
 
     matrix = load_matrix(matrix_path)
+    if methods is not None:                       # nightly --method: the matrix's products of these methods
+        from harness.methods import parse_methods
+
+        matrix["params"] = select_methods(matrix["params"], parse_methods(methods))
     night = night or _date.today().isoformat()
     try:
         _date.fromisoformat(night)
@@ -350,4 +397,5 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
 
 def run_nightly_cli(args):
     """Progress on stderr (``harness.progress``); the result on stdout."""
-    return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler)
+    return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler,
+                       methods=getattr(args, "method", None))

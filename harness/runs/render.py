@@ -1,12 +1,13 @@
-"""One SSLPV render of one scene into a folder (``sslpv-harness render``, and every sweep configuration).
+"""One render of one scene into a folder (``sslpv-harness render``, and every sweep configuration).
 
 Writes, atomically (the folder appears complete or not at all):
 
 * ``full.exr`` -- subsurface + direct reflection, linear RGB, top row first, with the ``mask`` layer;
 * ``subsurface.exr`` -- the SSLPV part, with the coverage ``mask`` as an extra layer;
 * ``preview.png`` -- the full image, auto exposure;
-* ``render.json`` -- every parameter, scene name and content hash, GL renderer,
-  per-stage GPU timings (ms), warnings and image size.
+* ``render.json`` -- the method and every parameter, scene name and content hash, GL renderer,
+  per-stage GPU timings (ms), warnings and image size; for a method other than SSLPV also
+  its precomputation (``precompute``: step -> ms and work) and work counts per stage (``work``).
 """
 
 from __future__ import annotations
@@ -25,10 +26,10 @@ __all__ = ["run_render", "write_render_dir"]
 
 
 def write_render_dir(out_dir, full, subsurface, mask, info, preview, exposure):
-    """Write one SSLPV render folder atomically: both EXRs (with the coverage ``mask`` layer),
+    """Write one render folder atomically: both EXRs (with the coverage ``mask`` layer),
     a PNG preview of ``preview`` at ``exposure`` stops, and ``render.json`` from ``info``.
 
-    The one layout of an SSLPV render, used by ``render`` and by every sweep configuration.
+    The one layout of a render, used by ``render`` and by every sweep configuration.
     """
     mask = mask.astype("f4")
     with atomic_dir(out_dir) as tmp:
@@ -38,19 +39,22 @@ def write_render_dir(out_dir, full, subsurface, mask, info, preview, exposure):
         (tmp / "render.json").write_text(json.dumps(info, indent=2, sort_keys=True, default=str) + "\n")
 
 
-def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, as_json=False, renderer=None):
-    """Render a scene and write the output folder; returns the ``render.json`` content.
+def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, as_json=False, renderer=None,
+               method="sslpv"):
+    """Render a scene with ``method`` and write the output folder; returns the ``render.json`` content.
 
     ``renderer`` (an :class:`~sslpv_gl.renderer.SSLPVRenderer`) may be passed to
     reuse a context; ``as_json`` only affects how the CLI prints the result.
     """
     from sslpv_gl.renderer import SSLPVRenderer
 
-    params = params or SSLPVParams()
     scene = load_scene(scene_name_or_path)
     out_dir = Path(out_dir) if out_dir is not None else Path("renders") / scene.name
     check_replaceable(out_dir)                 # refused before the render, not after it
     check_writable(out_dir, "--out")
+    if method != "sslpv":
+        return _run_method_render(scene, out_dir, params, method)
+    params = params or SSLPVParams()
     result = (renderer or SSLPVRenderer()).render(scene, params)
     exposure = auto_exposure(result.full)
     info = {
@@ -69,5 +73,30 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
         "method": "SSLPV (Borlum et al., HPG 2011), GLSL renderer sslpv_gl",
     }
     write_render_dir(out_dir, result.full, result.subsurface, result.mask, info, result.full, exposure)
+    info["out_dir"] = str(out_dir)
+    return info
+
+
+def _run_method_render(scene, out_dir, params, method):
+    """``run_render`` for a method other than SSLPV (``harness.methods``)."""
+    from harness.methods import get_method
+
+    m = get_method(method)
+    params = params or m.params_type()
+    m.check_scene(scene)
+    res = m.render(scene, params)
+    exposure = auto_exposure(res.full)
+    info = {
+        "scene": scene.name, "scene_path": str(scene.path), "content_hash": scene.content_hash,
+        "method": method, "method_title": m.title, "params": m.as_dict(params), "gl_renderer": res.device,
+        "timings_ms": {k: float(v) for k, v in res.timings_ms.items()}, "frame_ms": res.frame_ms,
+        "precompute": {k: {"ms": res.precompute_ms.get(k), "work": res.precompute_work.get(k)}
+                       for k in sorted(set(res.precompute_ms) | set(res.precompute_work))},
+        "work": {k: int(v) for k, v in res.work.items()}, "work_units": {k: m.work_units.get(k) for k in res.work},
+        "info": res.info, "width": scene.camera.width, "height": scene.camera.height,
+        "covered_pixels": int(res.mask.sum()), "preview_exposure": exposure, "warnings": list(res.warnings),
+        "mesh_repair": scene.mesh.repair,
+    }
+    write_render_dir(out_dir, res.full, res.subsurface, res.mask, info, res.full, exposure)
     info["out_dir"] = str(out_dir)
     return info

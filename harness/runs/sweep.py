@@ -1,12 +1,14 @@
-"""``sslpv-harness sweep``: every SSLPV configuration of a parameter grid against
-each scene's cached Mitsuba reference, on Dask distributed.
+"""``sslpv-harness sweep``: every configuration of a parameter grid (SSLPV's, and with
+``--method`` the dipole rivals') against each scene's cached Mitsuba reference, on Dask distributed.
 
 =====================  ==============================================================
 option                 meaning
 =====================  ==============================================================
 ``--scenes A,B``       suite scenes (default: all)
+``--method A,B``      methods to sweep (default ``sslpv``; ``dipole``, ``dirpole``:
+                       ``harness.methods``); each takes the parameters that belong to it
 ``--grid 16,32``       any renderer parameter as a comma-separated list
-                       (``--steps``, ``--mapping``, ``--lookup``, ...)
+                       (``--steps``, ``--mapping``, ``--lookup``, ``--gather``, ``--spacing``, ...)
 ``--size WxH``         image size for SSLPV and the reference (default: the scene's);
                        ``--size small``: each scene at its committed small size (64x64, or
                        its own aspect: ``harness.reference.committed.small_size``), whose
@@ -84,8 +86,8 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from harness.io.atomic import atomic_write
 from harness.io.outputs import check_sweep_folder, check_writable, claim_sweep_folder
 from harness.errors import EnvironmentProblem, InputError
-from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, check_products, config_label, expand, \
-    param_lists_model, parse_lists, product_dict
+from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, any_product_model, check_products, config_label, \
+    parse_lists, product_dict
 from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, SweepSize, read_json, validate
 
 from harness.reference.committed import sized_scene
@@ -93,12 +95,18 @@ from harness.scene import list_scenes, load_scene, scene_path
 
 
 def expand_all(params):
-    """One product (dict of lists) or several (a list of them) -> their configurations, first seen first."""
+    """One product (dict of lists) or several (a list of them) -> their configurations, first seen first.
+
+    A product may name its method (``{"method": "dipole", ...}``, :mod:`harness.runs.rivals`);
+    SSLPV's configurations are SSLPVParams, another method's :class:`~harness.runs.rivals.MethodConfig`.
+    """
+    from harness.runs.rivals import expand_product, method_of
+
     products = params if isinstance(params, list) else [params]
     out, seen = [], set()
     for product in products:
-        for p in expand(product):
-            key = tuple(sorted(p.as_dict().items()))
+        for p in expand_product(product):
+            key = (method_of(p), tuple(sorted(p.as_dict().items())))
             if key not in seen:
                 seen.add(key)
                 out.append(p)
@@ -110,7 +118,7 @@ SWEEP_FILE = "sweep.json"
 DEFAULT_LP_THREADS = "default"
 
 
-_PRODUCT = param_lists_model("field")
+_PRODUCT = any_product_model("field")
 
 
 @pydantic_dataclass(config=INPUT_CONFIG)
@@ -122,7 +130,7 @@ class SweepConfig:
     """
 
     scenes: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]  # names or folders
-    params: Union[_PRODUCT, list[_PRODUCT]]  # SSLPVParams field -> list of values (or a list of such products)
+    params: Union[_PRODUCT, list[_PRODUCT]]  # field -> list of values (or a list of such products; "method")
     out: str                                 # output folder
     store: str = ""                          # results store (default OUT/store.sqlite)
     size: Optional[SweepSize] = None         # [W, H]; "small": each scene's committed size; None: the scene's own
@@ -185,7 +193,10 @@ def resolve_scenes(spec, where="--scenes", field="scenes"):
 def config_from_args(args):
     if args.config:
         # The file holds the whole configuration: a flag beside it would be silently ignored.
-        given = [k for k in (*CLI_TO_FIELD, "scenes", "size", "store") if getattr(args, k, None) is not None]
+        from harness.methods.params import all_cli_names
+
+        given = [k for k in (*all_cli_names(), "method", "scenes", "size", "store")
+                 if getattr(args, k, None) is not None]
         if given:
             flag = "--" + given[0].replace("_", "-")
             raise InputError(flag, given[0], "cannot be combined with --config (the file holds the whole sweep)",
@@ -196,9 +207,22 @@ def config_from_args(args):
         return cfg
     if not args.out:
         raise InputError("--out", "out", "is required", "give an output folder, or --config sweep.json")
-    lists = parse_lists({k: getattr(args, k, None) for k in CLI_TO_FIELD})
+    lists = _params_from_args(args)
     return SweepConfig(scenes=resolve_scenes(args.scenes) if args.scenes else list_scenes(), params=lists,
                        out=str(args.out), store=str(args.store or ""), size=parse_size(args.size))
+
+
+def _params_from_args(args):
+    """The sweep's products: SSLPV's lists as before methods, or one product per method (``--method``)."""
+    from harness.methods import parse_methods
+    from harness.methods.params import all_cli_names, products
+
+    methods = parse_methods(getattr(args, "method", None))
+    values = {k: getattr(args, k, None) for k in all_cli_names()}
+    if methods == ["sslpv"]:
+        products(methods, values)                     # a flag of another method is refused here
+        return parse_lists({k: values.get(k) for k in CLI_TO_FIELD})
+    return products(methods, values)
 
 
 # --------------------------------------------------------------------------- references
@@ -399,6 +423,9 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     if not configs:
         raise InputError("sweep", "params", "no configurations", "give at least one value per parameter")
     scenes = [sized_scene(load_scene(n), cfg.size) for n in cfg.scenes]
+    from harness.runs.rivals import check_scenes, method_of
+
+    check_scenes(scenes, configs)            # a rival on a scene it cannot represent: one line, nothing written
     # ---- every output is checked before the first thing is written (and before minutes of references)
     check_sweep_folder(out)
     check_writable(store_path, "--store")
@@ -415,12 +442,14 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                 run_id = _resume_or_start(store, cfg, out)
                 done = store.done_keys(run_id)
                 todo = [(s, p, key) for s in scenes for p in configs
-                        if (key := store.config_key(s.content_hash, p.as_dict())) not in done]
+                        if (key := store.config_key(s.content_hash, p.as_dict(), method_of(p))) not in done]
                 summary = {"out": str(out), "store": str(store_path), "run_id": run_id,
                            "sweep_json": str(out / SWEEP_FILE), "configurations": len(scenes) * len(configs),
                            "skipped_done": len(scenes) * len(configs) - len(todo), "ok": 0, "failed": 0,
                            "not_run": 0, "references": {k: str(v) for k, v in refs.items()}, "gl_renderer": None}
-                groups = group_configs(todo, group)
+                # SSLPV in step groups; another method's configuration alone (harness.runs.rivals), one "group" each
+                groups = group_configs([t for t in todo if method_of(t[1]) == "sslpv"], group)
+                groups += [(s, p, [(None, key)]) for s, p, key in todo if method_of(p) != "sslpv"]
                 summary["groups"] = len(groups)
                 if todo:
                     if client is None:
@@ -495,7 +524,7 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
     from harness.io.images import auto_exposure
     from harness.progress import Progress
 
-    from harness.runs import worker as sweep_worker
+    from harness.runs import rivals, worker as sweep_worker
 
     shared = {}
 
@@ -514,6 +543,10 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
     def submit(i):
         s, p, members = groups[i]
         ref_f, floors, _ = shared[s.name]
+        if rivals.method_of(p) != "sslpv":     # before the SSLPV groups: a dense gather is often the longest task
+            pending[rivals.submit(client, sweep_worker, s, cfg.size, p, ref_f, floors, n_groups + 1,
+                                  attempts[i])] = i
+            return
         ks = [k for k, _ in members]
         tag = members[0][1] if len(members) == 1 else "group-" + members[0][1] + f"-{len(members)}"
         tag += f"-r{attempts[i]}" if attempts[i] else ""
@@ -564,6 +597,12 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
                             continue
                         err = f"{type(exc).__name__}: {exc}".splitlines()[0]
                         results = [{"status": "failed", "error": err} for _ in members]
+                    if rivals.method_of(p) != "sslpv":     # another method's configuration (one result)
+                        res = results if isinstance(results, dict) else results[0]
+                        rivals.record(store, run_id, s, p, members[0][1], res, out, refs, summary,
+                                      shared[s.name][2], _write_render)
+                        bar.advance(failed=int(res["status"] != "ok"), detail=f"{s.name} {p.label()}")
+                        continue
                     for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
                         pk = p.replace(steps=k)
                         _record(store, run_id, s, pk, key, res, out, refs, summary, shared[s.name][2])
@@ -600,7 +639,7 @@ def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
                         render_dir=str(render_dir) if render_dir else None,
                         reference_dir=str(refs[s.name]), steps_used=res.get("steps_used"),
                         diagnostics=res.get("diagnostics"), calibration=res.get("calibration"),
-                        shared=res.get("shared"))
+                        shared=res.get("shared"), precompute=res.get("precompute"), work=res.get("work"))
 
 
 def _crash():

@@ -1,4 +1,7 @@
-"""What one Dask worker does for one SSLPV configuration: render, then measure.
+"""What one Dask worker does for one configuration: render, then measure.
+
+SSLPV configurations come in step groups (:func:`run_group`); those of the other methods
+(``harness.methods``: the dipole rivals) one at a time (:func:`run_method`).
 
 Each worker process creates and owns one OpenGL context (one
 :class:`sslpv_gl.renderer.SSLPVRenderer`), made on its first task and reused for
@@ -27,6 +30,9 @@ def release_renderer():
     if _RENDERER is not None:
         _RENDERER.ctx.release()
         _RENDERER = None
+    from harness.methods import release_all
+
+    release_all()                                  # the other methods' renderers (harness.methods)
 
 
 def renderer():
@@ -132,6 +138,14 @@ def _pause_if_asked(scene_path, params, ks):
             time.sleep(0.2)
 
 
+def _sslpv_costs(result, scene, params):
+    """SSLPV's work counts and precomputation as the method interface states them (``harness.methods.sslpv``)."""
+    from harness.methods import get_method
+
+    res = get_method("sslpv").result(result, scene, params)
+    return {"work": {k: int(v) for k, v in res.work.items()}, "precompute": precompute_record(res)}
+
+
 def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=True):
     """Render one configuration per step count in ``steps_list`` (all else from ``params``) and measure each.
 
@@ -187,6 +201,7 @@ def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=Tru
             for i in todo:
                 try:
                     out[i] = _ok_result(by_k[ks[i]], ref, floors, group_steps)
+                    out[i].update(_sslpv_costs(by_k[ks[i]], scene, base.replace(steps=ks[i])))
                 except Exception as exc:  # one bad image fails its own configuration only
                     out[i] = {"status": "failed", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
     except Exception as exc:  # one failed group is recorded; the sweep goes on
@@ -196,4 +211,52 @@ def run_group(scene_path, size, params, steps_list, ref, floors, diagnostics=Tru
     wall = time.perf_counter() - t0
     for r in out:
         r["wall_s"] = wall
+    return out
+
+
+# --------------------------------------------------------------------------- other methods (harness.methods)
+
+def _method_timings(res):
+    """Frame stages of a :class:`harness.methods.MethodResult` (finite ones), and their sum as ``total``."""
+    timings = {k: float(v) for k, v in res.timings_ms.items() if isinstance(v, (int, float)) and np.isfinite(v)}
+    if timings and len(timings) == len(res.timings_ms):
+        timings["total"] = float(sum(timings.values()))
+    return timings
+
+
+def precompute_record(res):
+    """``{step: {"ms", "work"}}`` of a :class:`harness.methods.MethodResult` (the store's precompute_json)."""
+    steps = sorted(set(res.precompute_ms) | set(res.precompute_work))
+    return {s: {"ms": _finite_or_none(float(res.precompute_ms[s])) if s in res.precompute_ms else None,
+                "work": int(res.precompute_work[s]) if s in res.precompute_work else None} for s in steps}
+
+
+def run_method(scene_path, size, method, params, ref, floors):
+    """Render one configuration of a method other than SSLPV (``harness.methods``) and measure it.
+
+    ``params`` is the method's parameter dict. Errors are returned, not raised. The result
+    carries the frame timings (``total`` their sum), the work counts and the precomputation
+    (``{step: {"ms", "work"}}``), kept apart from the frame.
+    """
+    from harness.methods import get_method
+
+    t0 = time.perf_counter()
+    try:
+        m = get_method(method)
+        scene = _scene(str(scene_path), tuple(size) if size else None)
+        m.check_scene(scene)
+        res = m.render(scene, m.params_from_dict(params))
+        images = {"subsurface": res.subsurface, "full": res.full}
+        for part, img in images.items():
+            if not np.all(np.isfinite(img)):
+                raise FloatingPointError(f"{method} {part} image has {int(np.count_nonzero(~np.isfinite(img)))} "
+                                         "non-finite pixels")
+        out = {"status": "ok", "images": images, "mask": res.mask, "timings": _method_timings(res),
+               "metrics": measure(images, ref, floors), "gl_renderer": res.device, "steps_used": None,
+               "diagnostics": _finite_or_none(res.info) or None, "calibration": None, "shared": None,
+               "work": {k: int(v) for k, v in res.work.items()}, "precompute": precompute_record(res),
+               "warnings": list(res.warnings)}
+    except Exception as exc:  # one failed configuration is recorded; the sweep goes on
+        out = {"status": "failed", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+    out["wall_s"] = time.perf_counter() - t0
     return out

@@ -14,7 +14,7 @@ from harness.store.store import _dumps
 EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "status", "error", "render_dir",
                   "reference_dir", "created_at", "cost_ms"] + [f"ms_{s}" for s in STAGES] + [
                   "steps_used", "diagnostics_json", "calibration_json", "shared_json", "params_json", "image", "metric", "value", "noise_floor", "per_channel_json",
-                  "metric_params_json"]
+                  "metric_params_json", "method", "precompute_json", "work_json"]
 
 
 def export(store, path, run_id=None, scene=None):
@@ -53,8 +53,8 @@ def export(store, path, run_id=None, scene=None):
     flat = []
     for r in rows:
         d = {k: v for k, v in r.items() if k not in ("params", "per_channel", "metric_params", "diagnostics",
-                                                     "calibration", "shared")}
-        for name in ("diagnostics", "calibration", "shared"):
+                                                     "calibration", "shared", "precompute", "work")}
+        for name in ("diagnostics", "calibration", "shared", "precompute", "work"):
             d[f"{name}_json"] = None if r[name] is None else _dumps(r[name], False)
         d["params_json"] = _dumps(r["params"])
         d["per_channel_json"] = None if r["per_channel"] is None else _dumps(r["per_channel"], False)
@@ -62,7 +62,9 @@ def export(store, path, run_id=None, scene=None):
         for p in pnames:
             d[f"param.{p}"] = _dumps(r["params"][p]) if p in r["params"] else None
         flat.append(d)
-    columns = EXPORT_COLUMNS + [f"param.{p}" for p in pnames]
+    # another method's stages (``ms_gather``, ...) follow SSLPV's fixed ones
+    extra_ms = sorted({k for d in flat for k in d if k.startswith("ms_")} - set(EXPORT_COLUMNS))
+    columns = EXPORT_COLUMNS + extra_ms + [f"param.{p}" for p in pnames]
     with atomic_write(path) as tmp:
         if fmt == ".parquet":
             table = pa.Table.from_pylist(flat) if flat else pa.table({c: [] for c in columns})

@@ -21,12 +21,17 @@ table              columns
                    shared_json (NULL for a configuration rendered alone; for one
                    rendered in a step group, ``{"stages": [...], "group_steps":
                    [...]}``: the stages measured once for the whole group and the
-                   step counts that shared them)
+                   step counts that shared them); since v3 also method (TEXT, the
+                   ``--method`` that rendered it; ``sslpv`` for every older row),
+                   precompute_json (``{step: {"ms", "work"}}``: the method's
+                   precomputation, kept apart from the frame) and work_json
+                   (``{stage: count}``: device-independent work per frame stage)
 ``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
                    noise_floor, per_channel_json, params_json;
                    PRIMARY KEY(config_id, image, metric)
-``timings``        config_id, stage (``rsm``, ``injection``, ``propagation``,
-                   ``shading``, ``total``), ms; PRIMARY KEY(config_id, stage)
+``timings``        config_id, stage (SSLPV's ``rsm``, ``injection``, ``propagation``,
+                   ``shading``; another method's own stages, e.g. ``gather``; and
+                   ``total``, the frame), ms; PRIMARY KEY(config_id, stage)
 =================  ==============================================================
 
 Concurrency: the file is in WAL mode with a 30 s busy timeout, and every write
@@ -48,8 +53,11 @@ Timestamps are UTC ISO 8601 (``2025-01-31T12:00:00+00:00``).
 
 #: Images that metrics are recorded for.
 IMAGES = ("subsurface", "full")
-#: SSLPV stages that timings are recorded for (``total`` is the whole frame).
+#: SSLPV stages that timings are recorded for (``total`` is the whole frame); another method
+#: records its own (``Store.record_config(stages=...)``).
 STAGES = ("rsm", "injection", "propagation", "shading", "total")
+#: What a method name may look like.
+METHOD_NAME = r"[a-z][a-z0-9_]{0,31}"
 #: Status of one configuration.
 CONFIG_STATUSES = ("ok", "failed")
 
@@ -124,6 +132,16 @@ def _migration_2(db):
     """)
 
 
+def _migration_3(db):
+    """The method of each configuration (older rows: SSLPV), its precomputation and its work counts."""
+    _run_script(db, """
+        ALTER TABLE configurations ADD COLUMN method TEXT NOT NULL DEFAULT 'sslpv';
+        ALTER TABLE configurations ADD COLUMN precompute_json TEXT;
+        ALTER TABLE configurations ADD COLUMN work_json TEXT;
+        CREATE INDEX configurations_method ON configurations(scene, method)
+    """)
+
+
 def _run_script(db, script):
     """Run ``;``-separated DDL statement by statement (``executescript`` would
     COMMIT the migration's transaction half-way)."""
@@ -135,7 +153,7 @@ def _run_script(db, script):
 #: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
 #: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
 #: ``user_version``, so a failed migration leaves the store as it was.
-MIGRATIONS = [_migration_1, _migration_2]
+MIGRATIONS = [_migration_1, _migration_2, _migration_3]
 
 
 def schema_version():

@@ -20,6 +20,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import sqlite3
 import threading
 import time
@@ -29,7 +30,7 @@ from pathlib import Path
 from harness.errors import InputError
 from harness.io.outputs import check_writable
 from harness.store import provenance, schema
-from harness.store.schema import BUSY_TIMEOUT_MS, CONFIG_STATUSES, IMAGES, STAGES
+from harness.store.schema import BUSY_TIMEOUT_MS, CONFIG_STATUSES, IMAGES, METHOD_NAME, STAGES
 
 
 # ---------------------------------------------------------------- helpers
@@ -380,18 +381,22 @@ class Store:
     # -- configurations --------------------------------------------------------
 
     @staticmethod
-    def config_key(scene_hash, params):
-        """Stable key of one configuration: sha256 of the scene hash and the canonical params JSON.
+    def config_key(scene_hash, params, method="sslpv"):
+        """Stable key of one configuration: sha256 of the scene hash, the method and the canonical params JSON.
 
         Key order, tuples vs lists, numpy vs Python numbers and ``32.0`` vs
-        ``32`` do not change the key.
+        ``32`` do not change the key. An SSLPV key is the one it was before methods
+        (the method is left out of the hashed text), so older stores resume as before.
         """
-        text = _dumps({"scene_hash": str(scene_hash), "params": params})
+        doc = {"scene_hash": str(scene_hash), "params": params}
+        if method != "sslpv":
+            doc["method"] = str(method)
+        text = _dumps(doc)
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
     def record_config(self, run_id, scene, scene_hash, params, status, error=None, metrics=(),
                       timings=None, render_dir=None, reference_dir=None, steps_used=None, diagnostics=None,
-                      calibration=None, shared=None):
+                      calibration=None, shared=None, method="sslpv", precompute=None, work=None, stages=None):
         """Record one configuration with its metrics and timings in ONE transaction.
 
         Either everything is written or nothing is (a bad metric value rolls
@@ -412,7 +417,7 @@ class Store:
             Each ``{image, metric, value, noise_floor, per_channel, params}``
             (rows of ``harness.metrics.compare_images`` plus ``image``).
         timings : dict of str to float
-            Stage (:data:`STAGES`) -> milliseconds.
+            Stage (SSLPV's :data:`STAGES`, or the method's own ``stages``) -> milliseconds.
         render_dir, reference_dir : path, optional
             Where the SSLPV render and the reference images are.
         steps_used : int, optional
@@ -428,6 +433,15 @@ class Store:
             For a configuration rendered in a step group (one propagation for
             several step counts): ``{"stages": [...], "group_steps": [...]}``,
             the stages whose timings were measured once for the group.
+        method : str
+            The method that rendered it (``--method``; default ``sslpv``).
+        precompute : dict, optional
+            ``{step: {"ms": float, "work": int}}``: the method's precomputation.
+        work : dict, optional
+            ``{stage: count}``: device-independent work per frame stage.
+        stages : sequence of str, optional
+            The method's frame stages that ``timings`` may name (besides ``total``);
+            default SSLPV's (:data:`STAGES`).
 
         Returns
         -------
@@ -447,8 +461,11 @@ class Store:
         if steps_used is not None and (isinstance(steps_used, bool) or not isinstance(steps_used, int)
                                        or steps_used < 0):
             raise InputError(where, "steps_used", f"is {steps_used!r}", "record a step count >= 0, or None")
+        if not isinstance(method, str) or not re.fullmatch(METHOD_NAME, method):
+            raise InputError(where, "method", f"is {method!r}", "name the method, e.g. 'sslpv'")
         extra = {}
-        for name, value in (("diagnostics", diagnostics), ("calibration", calibration), ("shared", shared)):
+        for name, value in (("diagnostics", diagnostics), ("calibration", calibration), ("shared", shared),
+                            ("precompute", precompute), ("work", work)):
             if value is not None and not isinstance(value, dict):
                 raise InputError(where, name, f"is a {type(value).__name__}", "pass a dict, or None")
             if name == "calibration" and value is not None and not {"path", "sha256"} <= set(value):
@@ -458,7 +475,7 @@ class Store:
             except (TypeError, ValueError) as exc:
                 raise InputError(where, name, f"is not JSON-serialisable with finite numbers ({exc})",
                                  "pass plain numbers (None for a missing one), strings, lists and dicts") from exc
-        key = self.config_key(scene_hash, params)
+        key = self.config_key(scene_hash, params, method)
         with self._write() as db:
             old = db.execute("SELECT id, status FROM configurations WHERE run_id = ? AND config_key = ?",
                              (run_id, key)).fetchone()
@@ -472,12 +489,13 @@ class Store:
             cur = db.execute(
                 "INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json, status,"
                 " error, render_dir, reference_dir, created_at, steps_used, diagnostics_json, calibration_json,"
-                " shared_json) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " shared_json, method, precompute_json, work_json) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (run_id, str(scene), str(scene_hash), key, params_json, status,
                  None if error is None else str(error),
                  None if render_dir is None else str(render_dir),
                  None if reference_dir is None else str(reference_dir), _now(), steps_used,
-                 extra["diagnostics"], extra["calibration"], extra["shared"]))
+                 extra["diagnostics"], extra["calibration"], extra["shared"], method, extra["precompute"],
+                 extra["work"]))
             cid = cur.lastrowid
             # Rows are checked one at a time as they are inserted; a bad one
             # raises inside the transaction and everything above rolls back.
@@ -506,9 +524,10 @@ class Store:
                         raise
                     raise InputError(where, f"{f}.params", f"is not JSON-serialisable ({exc})",
                                      "pass plain numbers, strings, lists and dicts") from exc
+            allowed = tuple(STAGES if stages is None else tuple(stages) + ("total",))
             for stage, ms in (timings or {}).items():
-                if stage not in STAGES:
-                    raise InputError(where, "timings", f"unknown stage {stage!r}", f"use {', '.join(STAGES)}")
+                if stage not in allowed:
+                    raise InputError(where, "timings", f"unknown stage {stage!r}", f"use {', '.join(allowed)}")
                 ms = _finite(where, f"timings.{stage}", ms)
                 if ms < 0:
                     raise InputError(where, f"timings.{stage}", f"is {ms} ms", "record elapsed times >= 0")
@@ -532,8 +551,9 @@ class Store:
         ``params`` (dict), ``timings`` (stage -> ms), ``cost_ms`` (``total``,
         else the sum of the stages, else None), ``metrics``
         (``{image: {metric: {value, noise_floor, per_channel, params}}}``),
-        ``steps_used`` (int or None), and ``diagnostics``, ``calibration`` and
-        ``shared`` (dicts, or None; see :meth:`record_config`).
+        ``steps_used`` (int or None), ``diagnostics``, ``calibration``,
+        ``shared``, ``precompute`` and ``work`` (dicts, or None), and ``method``
+        (see :meth:`record_config`).
         """
         where, args = self._filter(run_id, scene)
         confs = self._read("SELECT c.*, r.kind AS run_kind, r.date AS run_date, r.started_at AS run_started_at,"
@@ -543,7 +563,7 @@ class Store:
         for c in confs:
             d = dict(c)
             d["params"] = _loads(d.pop("params_json"))
-            for name in ("diagnostics", "calibration", "shared"):
+            for name in ("diagnostics", "calibration", "shared", "precompute", "work"):
                 d[name] = _loads(d.pop(f"{name}_json"))
             d["timings"], d["metrics"], d["cost_ms"] = {}, {}, None
             out[d["id"]] = d
@@ -567,17 +587,20 @@ class Store:
 
         Columns: run_id, config_id, scene, scene_hash, config_key, status,
         error, render_dir, reference_dir, created_at, cost_ms, ``ms_<stage>``
-        for each stage, steps_used, diagnostics, calibration, shared (dicts or
-        None), params (dict), image, metric, value, noise_floor, per_channel
-        (list or None), metric_params (dict).
+        for each SSLPV stage and each stage another method of the selection
+        recorded, steps_used, diagnostics, calibration, shared, precompute,
+        work (dicts or None), method, params (dict), image, metric, value,
+        noise_floor, per_channel (list or None), metric_params (dict).
         """
         rows = []
-        for c in self.configs(run_id, scene):
+        configs = self.configs(run_id, scene)
+        stages = list(STAGES) + sorted({s for c in configs for s in c["timings"]} - set(STAGES))
+        for c in configs:
             base = {k: c[k] for k in ("run_id", "id", "scene", "scene_hash", "config_key", "status", "error",
                                       "render_dir", "reference_dir", "created_at", "cost_ms", "steps_used",
-                                      "diagnostics", "calibration", "shared")}
+                                      "diagnostics", "calibration", "shared", "method", "precompute", "work")}
             base["config_id"] = base.pop("id")
-            for s in STAGES:
+            for s in stages:
                 base[f"ms_{s}"] = c["timings"].get(s)
             base["params"] = c["params"]
             mrows = [(img, name, m) for img, ms in c["metrics"].items() for name, m in ms.items()]
