@@ -142,6 +142,7 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
     for c in configs:
         by_scene.setdefault(c["scene"], []).append(c)
     slugs = _slugs(by_scene)
+    methods = _methods(configs)                    # more than one: the methods view and table
 
     scene_rows, worst_all, pages = [], [], {}
     with atomic_dir(out_dir) as site:
@@ -155,14 +156,17 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
             slug = slugs[scene]
             href = f"scenes/{slug}/index.html"
             info = _scene_page(env, common, site / "scenes" / slug, scene, cs, budget, flip_compute, flip_note,
-                               notes)
+                               notes, methods)
             pages[scene] = out_dir / href
             for c in (info["best"], info["worst"]):
                 if c is not None:
                     c["href"] = f"{href}#c{c['id']}"
             thumbs = [{"src": f"scenes/{slug}/{t['src']}", "alt": t["alt"]} for t in info["thumbs"]]
+            for b in info["method_best"].values():
+                if b.get("config") is not None:
+                    b["href"] = f"{href}#c{b['config']['id']}"
             scene_rows.append({"name": scene, "href": href, "n_ok": info["n_ok"], "n_failed": info["n_failed"],
-                               "thumbs": thumbs,
+                               "thumbs": thumbs, "method_best": info["method_best"],
                                "best": info["best"], "best_note": info["best_note"], "worst": info["worst"],
                                "param_keys": info["keys"]})
             for c in cs:
@@ -175,6 +179,7 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
             notes.append(f"No configuration has {rank_label}; best/worst cannot be ranked.")
         html = env.get_template("index.html.j2").render(
             **common, root="", scenes=scene_rows, worst_cases=worst_all[:WORST_CASES], headline=HEADLINE,
+            methods=methods, method_metrics=METHOD_METRICS,
             n_ok=len(ok), n_failed=len(failed), extra_sections=_extra(extra_sections), notes=notes)
         (site / "index.html").write_text(html, encoding="utf-8")
 
@@ -185,11 +190,14 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
 
 # ------------------------------------------------------------------ one scene
 
-def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_note, notes):
+def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_note, notes, methods=("sslpv",)):
     """Write one scene's folder (images, EXRs, plots, index.html); returns its summary."""
     img_dir, exr_dir, plot_dir = folder / "img", folder / "exr", folder / "plots"
     for d in (img_dir, exr_dir, plot_dir):
         d.mkdir(parents=True, exist_ok=True)
+    if len(methods) > 1:                           # show each configuration's method beside its parameters
+        for c in configs:
+            c["params"] = {"method": c.get("method", "sslpv"), **c["params"]}
     ok = [c for c in configs if c["status"] == "ok"]
     failed = [c for c in configs if c["status"] != "ok"]
     keys = plots.varying_params(configs)
@@ -216,7 +224,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
 
     # Plots.
     plot_list, plot_notes = [], []
-    cs_plot = [c for c in ok]
+    cs_plot = [c for c in ok if c.get("method", "sslpv") == "sslpv"]   # SSLPV's axes; every method: methods view
     if not cs_plot:
         plot_notes.append("No successful configurations to plot.")
     else:
@@ -264,6 +272,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
                                          "1/energy ratio where it is not stored) vs the paper's factors."})
 
     best, best_note, worst = _best_worst(ok, budget)
+    method_view = _methods_view(ok, cards, methods, budget, plot_dir, folder) if len(methods) > 1 else None
     metric_names = sorted({m for c in ok for ms in c["metrics"].values() for m in ms},
                           key=lambda m: (METRIC_ORDER.index(m) if m in METRIC_ORDER else len(METRIC_ORDER), m))
     tables = [{"image": img, "metrics": [m for m in metric_names if any(m in c["metrics"].get(img, {}) for c in ok)],
@@ -277,7 +286,8 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
         refs=refs, plots=plot_list, plot_notes=plot_notes, tables=tables, configs=cards, failed=failed,
         best=best, best_note=best_note, worst=worst, numeric_keys=numeric_keys,
         relerr_bar="../../static/cbar_relerr.png", flip_bar="../../static/cbar_flip.png",
-        flip_available=flip_compute is not None, flip_note=flip_note, notes=scene_notes)
+        flip_available=flip_compute is not None, flip_note=flip_note, notes=scene_notes, methods_view=method_view,
+        method_metrics=METHOD_METRICS)
     (folder / "index.html").write_text(page, encoding="utf-8")
     notes.extend(f"{scene}: {n}" for n in scene_notes)
     # Thumbnails for the index: the reference and the best configuration (subsurface).
@@ -288,7 +298,56 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
         if best is not None and c["id"] == best["id"] and c["views"]["subsurface"].get("test_png"):
             thumbs.append({"src": c["views"]["subsurface"]["test_png"], "alt": f"best: configuration {c['id']}"})
     return {"n_ok": len(ok), "n_failed": len(failed), "best": best and dict(best), "best_note": best_note,
-            "worst": worst and dict(worst), "keys": keys, "thumbs": thumbs}
+            "worst": worst and dict(worst), "keys": keys, "thumbs": thumbs,
+            "method_best": method_view["best"] if method_view else {}}
+
+
+# ------------------------------------------------------------------ methods (harness.methods)
+
+#: (image, metric) of the methods table and view.
+METHOD_METRICS = (("subsurface", "relmse"), ("subsurface", "flip"))
+
+
+def _methods(configs):
+    """The methods of a run, SSLPV first (a store from before methods: SSLPV only)."""
+    return sorted({c.get("method", "sslpv") for c in configs}, key=lambda m: (m != "sslpv", m))
+
+
+def _methods_view(ok, cards, methods, budget, plot_dir, folder):
+    """Per method: the best configuration under the budget; the error-vs-cost plots across methods;
+    the images side by side (reference, then each method's best)."""
+    best = {}
+    for m in methods:
+        mine = [c for c in ok if c.get("method", "sslpv") == m]
+        b, note, _ = _best_worst(mine, budget) if mine else (None, "no successful configuration", None)
+        card = next((k for k in cards if b is not None and k["id"] == b["id"]), None)
+        best[m] = {"config": b, "note": note, "metrics": {f"{img}/{met}": b["metrics"].get(img, {}).get(met)
+                                                           for img, met in METHOD_METRICS} if b else {},
+                   "precompute_ms": _precompute_ms(b) if b else None,
+                   "work": total_work(b) if b else None,
+                   "png": card["views"]["subsurface"].get("test_png") if card else None}
+    plot_list = []
+    for image, metric in METHOD_METRICS:
+        if any(plots.value(c, image, metric) is not None for c in ok):
+            p = plot_dir / f"methods_{image}_{metric}_vs_cost.png"
+            plots.methods_error_vs_cost(ok, image, metric, p, budget)
+            plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs cost, every method",
+                              "caption": f"{metric} ({image}) of every configuration of every method against its "
+                                         "frame time (left, ms on the recorded renderer) and its work count (right, "
+                                         "the sum over stages of each stage's own unit: texels, cell updates, kernel "
+                                         "evaluations); circled and joined: the Pareto front across methods; dotted: "
+                                         "the median noise floor."})
+    return {"best": best, "plots": plot_list, "methods": methods}
+
+
+def _precompute_ms(c):
+    pre = c.get("precompute") or {}
+    vals = [v.get("ms") for v in pre.values() if isinstance(v, dict) and v.get("ms") is not None]
+    return float(sum(vals)) if vals else None
+
+
+def total_work(c):
+    return plots.total_work(c)
 
 
 def _best_worst(ok, budget):

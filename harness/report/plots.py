@@ -312,3 +312,50 @@ def colour_bar(path, cmap, vmin, vmax, label, extend="max"):
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
     _save(fig, path)
+
+
+# ------------------------------------------------------------------ methods (harness.methods)
+
+METHOD_MARKERS = {"sslpv": "o", "dipole": "s", "dirpole": "^"}
+
+
+def total_work(c):
+    """A configuration's work count: the sum over its frame stages (None when not recorded)."""
+    w = c.get("work")
+    return float(sum(w.values())) if w else None
+
+
+def methods_error_vs_cost(configs, image, metric, path, budget_ms=None):
+    """Metric vs per-frame cost for every configuration of every method, two panels: the frame
+    time (ms on the recorded renderer) and the device-independent work count; the Pareto front
+    is taken across all methods in each panel."""
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.0))
+    methods = sorted({c.get("method", "sslpv") for c in configs}, key=lambda m: (m != "sslpv", m))
+    for ax, (xlabel, xof) in zip(axes, (("frame time (ms, recorded renderer)", lambda c: c["cost_ms"]),
+                                        ("work count per frame (sum over stages)", total_work))):
+        pts = []
+        for k, m in enumerate(methods):
+            mine = [(xof(c), value(c, image, metric)) for c in configs if c.get("method", "sslpv") == m]
+            mine = [p for p in mine if p[0] is not None and p[1] is not None and p[0] > 0]
+            if mine:
+                xs, ys = zip(*mine)
+                ax.scatter(xs, ys, s=26, color=f"C{k}", marker=METHOD_MARKERS.get(m, "D"), label=m, zorder=2)
+            pts += mine
+        if pts:
+            front = [pts[i] for i in pareto_front(pts)]
+            fx, fy = zip(*front)
+            ax.step(fx, fy, where="post", color="black", lw=1.2, zorder=1)
+            ax.scatter(fx, fy, s=80, facecolors="none", edgecolors="black", lw=1.3, label="Pareto front (all methods)",
+                       zorder=3)
+            _logy(ax, [p[1] for p in pts])
+            if max(p[0] for p in pts) / min(p[0] for p in pts) > 30:
+                ax.set_xscale("log")
+        if budget_ms is not None and xof is not total_work:
+            ax.axvline(budget_ms, color="C3", ls="--", lw=1, label=f"budget {budget_ms:.3g} ms")
+        _floor_line(ax, configs, image, metric)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(_label(image, metric))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{_label(image, metric)} vs cost, every method", fontsize=10)
+    _save(fig, path)
