@@ -149,10 +149,14 @@ def precompute(scene, mat, kernel, density, range_, eta):
     if kernel == "dipole":
         sp, sa, st = lookup(mat, pos, nrm)
         m = kernels.material(sp, sa, eta, sigma_t=st)
-        exit_of = np.repeat(np.arange(len(pos)), np.diff(offsets))
-        r = np.linalg.norm(pos[exit_of] - pos[nbr], axis=1)
-        mp = {k: (v[exit_of] if isinstance(v, np.ndarray) and v.ndim == 2 else v) for k, v in m.items()}
-        factors = (kernels.rd_dipole(r[:, None], mp) / np.pi).astype(np.float32)
+        factors = np.empty((len(nbr), 3), dtype=np.float32)
+        for o0 in range(0, len(pos), 256):                # the material of each exit vertex, in chunks
+            o1 = min(o0 + 256, len(pos))
+            lo, hi = offsets[o0], offsets[o1]
+            exit_of = np.repeat(np.arange(o0, o1), np.diff(offsets[o0:o1 + 1]))
+            r = np.linalg.norm(pos[exit_of] - pos[nbr[lo:hi]], axis=1)
+            mp = {k: m[k][exit_of] for k in ("alpha_prime", "sigma_tr", "z_r", "z_v")}
+            factors[lo:hi] = kernels.rd_dipole(r[:, None], mp) / np.pi
     times["neighbourhoods"] = (time.perf_counter() - t) * 1e3
     t = time.perf_counter()
     idx, w = _display_weights(scene.mesh.vertices, pos, faces)
