@@ -1,0 +1,153 @@
+"""The method interface (``harness.methods``): parameters per method, labels, the store's method column,
+and the one-line refusals of bad input (unknown method, a parameter of another method, a rival on a scene it
+cannot represent). No rendering except where a refusal needs the scene (about 10 s)."""
+
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from harness.errors import InputError
+from harness.methods import METHOD_NAMES, config_label, get_method, parse_methods
+from harness.methods.params import expand, params_from_cli, products
+from harness.store import Store
+from harness.store.schema import MIGRATIONS
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "harness.cli", *args], capture_output=True, text=True, cwd=REPO,
+                          timeout=300)
+
+
+def one_line_error(proc, *fragments):
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    for f in fragments:
+        assert f in lines[0], lines[0]
+    assert "Traceback" not in proc.stderr
+    return lines[0]
+
+
+class TestRegistry:
+    def test_names_and_defaults(self):
+        assert METHOD_NAMES == ("sslpv", "dipole", "dirpole")
+        assert parse_methods(None) == ["sslpv"] and parse_methods("dipole, sslpv,dipole") == ["dipole", "sslpv"]
+        for name in METHOD_NAMES:
+            m = get_method(name)
+            assert m.name == name and m.stages and m.title
+        with pytest.raises(InputError, match="unknown method 'dipol'; use one of: sslpv, dipole, dirpole"):
+            parse_methods("dipol")
+
+    def test_products_give_each_method_its_own_parameters(self):
+        prods = products(["sslpv", "dipole"], {"grid": "16,32", "gather": "dense,vertex", "spacing": "1,0.5",
+                                                "density": "0.5", "steps": None})
+        assert prods == [{"method": "sslpv", "N": [16, 32]},
+                         {"method": "dipole", "gather": ["dense"], "spacing": [1.0, 0.5]},
+                         {"method": "dipole", "gather": ["vertex"], "density": [0.5]}]
+        dense = expand("dipole", {k: v for k, v in prods[1].items() if k != "method"})
+        assert [p.as_dict() for p in dense] == [{"gather": "dense", "spacing": 1.0, "shadow_size": 1024},
+                                                {"gather": "dense", "spacing": 0.5, "shadow_size": 1024}]
+        assert config_label("dipole", dense[1]) == "dipole-gather=dense-shadow_size=1024-spacing=0.5"
+        assert config_label("sslpv", {"N": 16, "steps": 8, "mapping": "collision"}) == "N16-K8-collision"
+
+    @pytest.mark.parametrize("methods,values,match", [
+        (["dipole"], {"grid": "16"}, "--grid: grid: is a parameter of sslpv, not of dipole; drop --grid or add sslpv"),
+        (["sslpv"], {"spacing": "1"}, "--spacing: spacing: is a parameter of dipole and dirpole, not of sslpv"),
+        (["dirpole"], {"gather": "dense", "range": "3"}, "--range: range: belongs to gather=vertex"),
+        (["dipole"], {"gather": "atlas"}, "--gather: gather: unknown gather 'atlas'; use one of: dense, vertex"),
+        (["dipole"], {"spacing": "0"}, r"--spacing: spacing: must be a number in \[0.05, 10\], got 0.0"),
+        (["dipole"], {"density": "x"}, "--density: density: 'x' is not a number"),
+    ])
+    def test_bad_parameters(self, methods, values, match):
+        with pytest.raises(InputError, match=match):
+            for prod in products(methods, values):
+                expand(prod.pop("method"), prod)
+
+    def test_render_takes_one_value(self):
+        assert params_from_cli("dirpole", {"gather": "vertex", "range": "2"}).range == 2.0
+        with pytest.raises(InputError, match="takes one value here"):
+            params_from_cli("dipole", {"spacing": "1,2"})
+
+
+class TestStore:
+    def test_sslpv_keys_unchanged_and_methods_apart(self):
+        p = {"N": 32, "steps": 16}
+        assert Store.config_key("h", p) == Store.config_key("h", p, "sslpv")
+        assert Store.config_key("h", p, "dipole") != Store.config_key("h", p)
+
+    def test_a_v2_store_migrates_and_its_rows_are_sslpv(self, tmp_path):
+        path = tmp_path / "old.sqlite"
+        db = sqlite3.connect(path, isolation_level=None)
+        db.execute("BEGIN")
+        for i, mig in enumerate(MIGRATIONS[:2]):
+            mig(db)
+            db.execute(f"PRAGMA user_version = {i + 1}")
+        db.execute("INSERT INTO runs (kind, started_at, date, versions_json, machine_json, config_json, status)"
+                   " VALUES ('sweep', '2026-01-01T00:00:00+00:00', '2026-01-01', '{}', '{}', '{}', 'finished')")
+        key = Store.config_key("h", {"N": 8, "steps": 4})
+        db.execute("INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json, status, created_at)"
+                   " VALUES (1, 'slab', 'h', ?, '{\"N\":8,\"steps\":4}', 'ok', '2026-01-01T00:00:00+00:00')", (key,))
+        db.execute("COMMIT")
+        db.close()
+        with Store(path) as st:
+            assert st.user_version == len(MIGRATIONS) >= 3
+            (c,) = st.configs()
+            assert c["method"] == "sslpv" and c["precompute"] is None and c["work"] is None
+            assert st.done_keys(1) == {key}                      # a resumed SSLPV sweep skips it, as before
+            st.record_config(1, "slab", "h", {"gather": "dense"}, "ok", method="dipole",
+                             timings={"gather": 2.0, "total": 2.0}, stages=get_method("dipole").stages,
+                             precompute={"sampling": {"ms": 1.0, "work": 10}}, work={"gather": 100})
+            rows = {r["method"]: r for r in st.configs()}
+            assert rows["dipole"]["work"] == {"gather": 100} and rows["dipole"]["timings"]["gather"] == 2.0
+            with pytest.raises(InputError, match="unknown stage 'gather'"):
+                st.record_config(1, "slab", "h", {"N": 9}, "ok", timings={"gather": 1.0})
+
+
+def _scene_with_albedo_zero(tmp_path):
+    src = (REPO / "reference_scenes" / "absorbing_sphere" / "scene.toml").read_text()
+    d = tmp_path / "black_sphere"
+    d.mkdir()
+    (d / "scene.toml").write_text(src.replace("value = [0.6, 0.6, 0.6]", "value = [0.0, 0.0, 0.0]"))
+    return d
+
+
+class TestBadInputOneLine:
+    def test_unknown_method(self, tmp_path):
+        one_line_error(cli("render", "thin_ring", "--method", "dipol", "--out", str(tmp_path / "r")),
+                       "--method: method: unknown method 'dipol'")
+        one_line_error(cli("sweep", "--method", "sslpv,atlas", "--out", str(tmp_path / "s")), "unknown method 'atlas'")
+        assert not (tmp_path / "s").exists()
+
+    def test_parameter_of_another_method(self, tmp_path):
+        one_line_error(cli("render", "thin_ring", "--method", "dipole", "--grid", "16", "--out", str(tmp_path / "r")),
+                       "--grid: grid: is a parameter of sslpv, not of dipole", "add sslpv to --method")
+        one_line_error(cli("sweep", "--method", "dirpole", "--steps", "8", "--out", str(tmp_path / "s")),
+                       "--steps: steps: is a parameter of sslpv, not of dirpole")
+        assert not (tmp_path / "s").exists()
+
+    def test_rival_on_a_scene_it_cannot_represent(self, tmp_path):
+        scene = _scene_with_albedo_zero(tmp_path)
+        line = one_line_error(cli("render", str(scene), "--method", "dipole", "--out", str(tmp_path / "r")),
+                              "medium.albedo: method dipole needs a scattering medium", "albedo 0",
+                              "--method sslpv")
+        assert not (tmp_path / "r").exists(), line
+        one_line_error(cli("sweep", "--scenes", str(scene), "--method", "dirpole", "--out", str(tmp_path / "s")),
+                       "method dirpole needs a scattering medium")
+        assert not (tmp_path / "s").exists()
+
+    def test_nightly_matrix_of_another_method(self, tmp_path):
+        from harness.regression.nightly import load_matrix
+
+        m = tmp_path / "m.toml"
+        m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4]\n'
+                     '[[also]]\nmethod = "dipole"\ngather = ["vertex"]\ngrid = [8]\n')
+        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a parameter of method dipole"):
+            load_matrix(m)
+        m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
+        with pytest.raises(InputError, match=r"also\[0\]\.method: unknown method 'atlas'"):
+            load_matrix(m)
