@@ -140,3 +140,6 @@ def test_vertex_converges_to_dense(renderer, kernel):
           f"relMSE {np.round(errs, 4).tolist()}, energy ratio {np.round(energies, 3).tolist()}")
     assert errs[0] > errs[1] > errs[2], errs
     assert abs(energies[0] - 1) > abs(energies[1] - 1) > abs(energies[2] - 1), energies
+    # and gets close: measured relMSE 0.0035 (dipole) and 0.047 (dirpole, whose near-field spike the skipped
+    # self vertex leaves out longest), energy 0.93 and 0.75 at (2, 3)
+    assert errs[2] < {"dipole": 0.01, "dirpole": 0.1}[kernel] and energies[2] > {"dipole": 0.9, "dirpole": 0.7}[kernel]
