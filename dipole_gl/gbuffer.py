@@ -16,26 +16,26 @@ from sslpv_gl.rsm import camera_view_proj, gl_bytes
 from .glsl import DIRS, MAX_LIGHTS
 from .irradiance import set_lights
 
-__all__ = ["build_program", "camera_pass", "run", "from_points", "read"]
+__all__ = ["build_program", "camera_program", "camera_pass", "run", "from_points", "read"]
 
 
-def build_program(ctx, warnings):
-    prog = _sh.program(ctx, "shade.vert", "gbuffer.frag", {"MAX_LIGHTS": MAX_LIGHTS}, dirs=DIRS)
-    _sh.check_uniforms(prog, ["u_view_proj", "u_eta", "u_cam_pos", "u_shadow"], "gbuffer", warnings)
+def camera_program(ctx, vertex, fragment, label, warnings):
+    """A raster program drawn by :func:`camera_pass`: the shadow-map atlas on unit 0."""
+    prog = _sh.program(ctx, vertex, fragment, {"MAX_LIGHTS": MAX_LIGHTS}, dirs=DIRS)
+    _sh.check_uniforms(prog, ["u_view_proj", "u_eta", "u_cam_pos", "u_shadow"], label, warnings)
     if "u_shadow" in prog:
         prog["u_shadow"].value = 0
     return prog
 
 
+def build_program(ctx, warnings):
+    return camera_program(ctx, "shade.vert", "gbuffer.frag", "gbuffer", warnings)
+
+
 def camera_pass(ctx, prog, vao, target, scene, views, shadow_tex, shadow_size, centre, radius):
     """Draw the mesh from the camera into ``target`` with the light, shadow and reflection uniforms set."""
     cam, b = scene.camera, scene.boundary
-    fbo = target.fbo
-    fbo.use()
-    fbo.viewport = (0, 0, cam.width, cam.height)
-    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-    ctx.disable(ctx.BLEND)
-    ctx.enable(ctx.DEPTH_TEST)
+    target.begin(ctx, (cam.width, cam.height))
     shadow_tex.use(0)
     prog["u_view_proj"].write(gl_bytes(camera_view_proj(cam, centre, radius)))
     set_lights(prog, scene, views, shadow_size)

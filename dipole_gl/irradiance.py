@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from sslpv_gl import shaders as _sh
-from sslpv_gl.rsm import gl_bytes
+from sslpv_gl.rsm import set_light_uniforms
 
 from .glsl import DIRS, MAX_LIGHTS
 
@@ -59,19 +59,8 @@ class PointBuffers:
 
 
 def set_lights(prog, scene, views, shadow_size):
-    """The light uniforms that ``shadow.glsl`` (and the irradiance) read."""
-    pos = np.zeros((MAX_LIGHTS, 3), dtype="f4")
-    inten = np.zeros((MAX_LIGHTS, 3), dtype="f4")
-    vps = np.tile(np.eye(4), (MAX_LIGHTS, 1, 1))
-    texel = np.zeros(MAX_LIGHTS, dtype="f4")
-    for i, (light, view) in enumerate(zip(scene.lights, views)):
-        pos[i], inten[i], vps[i] = light.position, light.intensity, view.view_proj
-        texel[i] = 2.0 * view.tan_half / shadow_size        # shadow-map texel size at distance 1
-    for name, data in (("u_light_pos", pos.tobytes()), ("u_light_I", inten.tobytes()),
-                       ("u_light_vp", gl_bytes(vps)), ("u_shadow_texel", texel.tobytes())):
-        if name in prog:
-            prog[name].write(data)
-    _sh.set_uniform(prog, "u_shadow_size", int(shadow_size))
+    """The light uniforms that ``shadow.glsl`` (and the irradiance) read (:func:`sslpv_gl.rsm.set_light_uniforms`)."""
+    set_light_uniforms(prog, scene, views, shadow_size, MAX_LIGHTS)
 
 
 def run(prog, points, scene, views, shadow_tex, shadow_size):

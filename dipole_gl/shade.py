@@ -7,20 +7,14 @@ Fresnel transmittance and adds the direct reflection off a dielectric boundary.
 
 from __future__ import annotations
 
-from sslpv_gl import shaders as _sh
 
-from .glsl import DIRS, MAX_LIGHTS
-from .gbuffer import camera_pass
+from .gbuffer import camera_pass, camera_program
 
 __all__ = ["build_program", "run"]
 
 
 def build_program(ctx, warnings):
-    prog = _sh.program(ctx, "shade_vertex.vert", "shade_vertex.frag", {"MAX_LIGHTS": MAX_LIGHTS}, dirs=DIRS)
-    _sh.check_uniforms(prog, ["u_view_proj", "u_eta", "u_cam_pos", "u_shadow"], "shade_vertex", warnings)
-    if "u_shadow" in prog:
-        prog["u_shadow"].value = 0
-    return prog
+    return camera_program(ctx, "shade_vertex.vert", "shade_vertex.frag", "shade_vertex", warnings)
 
 
 run = camera_pass

@@ -62,7 +62,7 @@ from . import shaders as _sh
 
 __all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view", "light_views",
            "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG", "build_program", "render_maps",
-           "render_shadow_atlas", "read_texels"]
+           "render_shadow_atlas", "set_light_uniforms", "read_texels"]
 
 #: Upper bound of the RSM half field of view (a light inside the bounding
 #: sphere would otherwise need a frustum wider than 180 degrees).
@@ -199,6 +199,24 @@ def render_maps(ctx, prog, vao, targets, scene, params, views):
         _draw_light(prog, vao, ctx, light, view, (0, 0, size, size))
         maps.append(t.textures)
     return maps, render_shadow_atlas(ctx, prog, vao, targets, scene, params.rsm_size, views)
+
+
+def set_light_uniforms(prog, scene, views, shadow_size, max_lights):
+    """The light uniforms that ``shadow.glsl`` and ``reflection.glsl`` read: position, intensity,
+    view-projection and shadow-map texel size at distance 1 of every light (arrays of ``max_lights``),
+    and the tile size of the shadow-map atlas. A uniform the compiler optimised away is skipped."""
+    pos = np.zeros((max_lights, 3), dtype="f4")
+    inten = np.zeros((max_lights, 3), dtype="f4")
+    vps = np.tile(np.eye(4), (max_lights, 1, 1))
+    texel = np.zeros(max_lights, dtype="f4")
+    for i, (light, view) in enumerate(zip(scene.lights, views)):
+        pos[i], inten[i], vps[i] = light.position, light.intensity, view.view_proj
+        texel[i] = 2.0 * view.tan_half / shadow_size             # shadow-map texel size at distance 1
+    for name, data in (("u_light_pos", pos.tobytes()), ("u_light_I", inten.tobytes()),
+                       ("u_light_vp", gl_bytes(vps)), ("u_shadow_texel", texel.tobytes())):
+        if name in prog:
+            prog[name].write(data)
+    _sh.set_uniform(prog, "u_shadow_size", int(shadow_size))
 
 
 def render_shadow_atlas(ctx, prog, vao, targets, scene, size, views, slot="shadow"):

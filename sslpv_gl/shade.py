@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import shaders as _sh
-from .rsm import camera_view_proj, gl_bytes
+from .rsm import camera_view_proj, gl_bytes, set_light_uniforms
 
 __all__ = ["MAX_LIGHTS", "build_program", "run", "read_images"]
 
@@ -67,12 +67,7 @@ def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, 
     """
     set_ = _sh.set_uniform
     cam = scene.camera
-    fbo = target.fbo
-    fbo.use()
-    fbo.viewport = (0, 0, cam.width, cam.height)
-    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-    ctx.disable(ctx.BLEND)
-    ctx.enable(ctx.DEPTH_TEST)
+    target.begin(ctx, (cam.width, cam.height))
     filt = ctx.LINEAR if params.lookup == "trilinear" else ctx.NEAREST
     for unit, t in enumerate(grid.accum if acc is None else acc):
         t.filter = (filt, filt)
@@ -93,18 +88,7 @@ def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, 
     set_(prog, "u_cam_pos", tuple(map(float, cam.origin)))
     n = len(scene.lights)
     set_(prog, "u_n_lights", 0 if b.index_matched else n)
-    pos = np.zeros((MAX_LIGHTS, 3), dtype="f4")
-    inten = np.zeros((MAX_LIGHTS, 3), dtype="f4")
-    vps = np.tile(np.eye(4), (MAX_LIGHTS, 1, 1))
-    texel = np.zeros(MAX_LIGHTS, dtype="f4")
-    for i, (light, view) in enumerate(zip(scene.lights, views)):
-        pos[i], inten[i], vps[i] = light.position, light.intensity, view.view_proj
-        texel[i] = 2.0 * view.tan_half / params.rsm_size        # shadow-map texel size at distance 1
-    for name, data in (("u_light_pos", pos.tobytes()), ("u_light_I", inten.tobytes()),
-                       ("u_light_vp", gl_bytes(vps)), ("u_shadow_texel", texel.tobytes())):
-        if name in prog:
-            prog[name].write(data)
-    set_(prog, "u_shadow_size", params.rsm_size)
+    set_light_uniforms(prog, scene, views, params.rsm_size, MAX_LIGHTS)
     vao.render(ctx.TRIANGLES)
 
 

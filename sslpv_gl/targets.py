@@ -45,6 +45,15 @@ class Target:
     def size(self):
         return self.textures[0].size
 
+    def begin(self, ctx, size):
+        """Start a raster pass into this target: bind it, set the viewport to ``size``, clear colour and
+        depth, blending off, depth test on."""
+        self.fbo.use()
+        self.fbo.viewport = (0, 0, int(size[0]), int(size[1]))
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        ctx.disable(ctx.BLEND)
+        ctx.enable(ctx.DEPTH_TEST)
+
     def release(self):
         self.fbo.release()
         self.depth.release()

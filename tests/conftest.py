@@ -19,17 +19,30 @@ and a test that adds a page to this one removes it again.
 import pytest
 
 
-@pytest.fixture(scope="session")
-def gl_renderer():
+def _renderer(make, release):
     from sslpv_gl.context import GLContextError
-    from sslpv_gl.renderer import SSLPVRenderer
 
     try:
-        renderer = SSLPVRenderer()
+        renderer = make()
     except GLContextError as exc:
         pytest.fail(str(exc), pytrace=False)
     yield renderer
-    renderer.ctx.release()
+    release(renderer)
+
+
+@pytest.fixture(scope="session")
+def gl_renderer():
+    from sslpv_gl.renderer import SSLPVRenderer
+
+    yield from _renderer(SSLPVRenderer, lambda r: r.ctx.release())
+
+
+@pytest.fixture(scope="session")
+def dipole_renderer():
+    """ONE :class:`dipole_gl.renderer.DipoleRenderer` (its own EGL context) for the session, as ``gl_renderer``."""
+    from dipole_gl.renderer import DipoleRenderer
+
+    yield from _renderer(DipoleRenderer, lambda r: r.release())
 
 
 @pytest.fixture(scope="session")

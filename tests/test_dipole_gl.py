@@ -22,16 +22,8 @@ RTOL = 1e-4
 
 
 @pytest.fixture(scope="module")
-def renderer():
-    from dipole_gl.renderer import DipoleRenderer
-    from sslpv_gl.context import GLContextError
-
-    try:
-        r = DipoleRenderer()
-    except GLContextError as exc:
-        pytest.fail(str(exc), pytrace=False)
-    yield r
-    r.release()
+def renderer(dipole_renderer):
+    return dipole_renderer
 
 
 def _close(gl, ref, label):
