@@ -151,3 +151,59 @@ class TestBadInputOneLine:
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
         with pytest.raises(InputError, match=r"also\[0\]\.method: unknown method 'atlas'"):
             load_matrix(m)
+
+
+class TestReportAndExport:
+    def test_methods_view_table_and_export(self, tmp_path):
+        """A run with SSLPV and two rivals: the scene page's methods view (table, images, plots), the index's
+        methods table, and the export's method, work and per-stage columns (about 5 s)."""
+        import csv
+
+        import numpy as np
+
+        from harness.io import images as imageio
+        from harness.metrics import compare_images
+        from harness.report import build_report
+
+        h, w = 24, 32
+        y, x = np.mgrid[0:h, 0:w]
+        ref = (np.exp(-((x - 16) ** 2 + (y - 12) ** 2) / 60.0)[..., None] * np.array([1.0, 0.6, 0.3])).astype(np.float32)
+        mask = (ref.mean(axis=-1) > 1e-3).astype(np.float32)
+        rng = np.random.default_rng(3)
+        half_a = np.clip(ref + rng.normal(0, 0.01, ref.shape), 0, None).astype(np.float32)
+        half_b = np.clip(2 * ref - half_a, 0, None).astype(np.float32)
+        rdir = tmp_path / "ref"
+        imageio.write_exr(rdir / "subsurface.exr", ref, extra={"mask": mask})
+        imageio.write_exr(rdir / "full.exr", ref)
+        store_path = tmp_path / "s.sqlite"
+        configs = [("sslpv", {"N": 16, "steps": 8, "mapping": "collision"}, 0.5, 3.0),
+                   ("sslpv", {"N": 32, "steps": 32, "mapping": "collision"}, 0.9, 9.0),
+                   ("dipole", {"gather": "dense", "spacing": 1.0}, 0.95, 40.0),
+                   ("dirpole", {"gather": "vertex", "range": 4.0, "density": 1.0}, 1.4, 2.0)]
+        with Store(store_path) as st:
+            run = st.start_run("sweep", {})
+            for i, (method, params, scale, ms) in enumerate(configs):
+                d = tmp_path / f"r{i}"
+                imageio.write_exr(d / "subsurface.exr", scale * ref)
+                imageio.write_exr(d / "full.exr", scale * ref)
+                rows = [{**r, "image": img} for img in ("subsurface", "full")
+                        for r in compare_images(scale * ref, ref, mask > 0.5, half_a, half_b)]
+                stage = {"sslpv": "shading", "dipole": "gather", "dirpole": "shading"}[method]
+                st.record_config(run, "blob", "h", params, "ok", metrics=rows, timings={stage: ms, "total": ms},
+                                 render_dir=d, reference_dir=rdir, method=method, stages=get_method(method).stages,
+                                 work={stage: 1000 * (i + 1)}, precompute={"material": {"ms": 5.0, "work": 64}})
+            st.finish_run(run, "finished")
+            n = st.export(tmp_path / "out.csv")
+        info = build_report(store_path, tmp_path / "site", cost_budget_ms=10.0, flip_maps=False)
+        page = info["scene_pages"]["blob"].read_text()
+        assert 'id="methods"' in page and "methods_subsurface_relmse_vs_cost.png" in page
+        for m in ("sslpv", "dipole", "dirpole"):
+            assert f"{m}: best" in page
+        assert (tmp_path / "site" / "scenes" / "blob" / "plots" / "methods_subsurface_flip_vs_cost.png").is_file()
+        index = (tmp_path / "site" / "index.html").read_text()
+        assert "Methods: the best configuration of each under the cost budget" in index
+        assert "(none within 10 ms; the cheapest is shown)" in index          # the dense dipole costs 40 ms
+        with open(tmp_path / "out.csv") as fh:
+            rows = list(csv.DictReader(fh))
+        assert n == len(rows) and {r["method"] for r in rows} == {"sslpv", "dipole", "dirpole"}
+        assert {"ms_gather", "ms_shading", "work_json", "precompute_json"} <= set(rows[0])
