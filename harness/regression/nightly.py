@@ -18,6 +18,11 @@
 
 The previous night's render folders (``reports/nightly/runs/<date>/renders``) must be kept
 until the next night, beside ``reports/nightly.sqlite``.
+
+A ``[[also]]`` table with ``method = "dipole"`` (or ``"dirpole"``) adds a rival's configurations
+(``harness.methods``; its parameters, e.g. ``gather = ["dense", "vertex"]``); they are judged against the
+previous night like SSLPV's (the committed baselines are SSLPV's). ``nightly --method M,...`` runs only the
+matrix's products of those methods.
 """
 
 import json
