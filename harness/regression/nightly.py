@@ -279,7 +279,7 @@ def trend_plots(store, night_run_ids, out_dir):
                 ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
                         color=colour, ls=styles[steps.index(k) % len(styles)], label=f"N{n} K{k}" if n else str(k))
             ax.set_yscale("log")
-            ax.set_title(f"mapping={mapping}", fontsize=9)
+            ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={mapping}", fontsize=9)
             ax.tick_params(axis="x", labelrotation=30, labelsize=7)
         ideal = "|x - 1|" if metric == "energy_ratio" else "value"
         axes[0][0].set_ylabel(f"{metric} ({ideal})")
