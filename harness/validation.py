@@ -200,12 +200,14 @@ def _fields(cls):
 
 
 def _tag(cls):
-    """The ``Literal`` value of a union member's ``kind`` (its discriminator), if any."""
+    """The ``Literal`` value of a union member's ``kind`` (its discriminator), or of its ``method``
+    (the parameter products of ``harness.runs.params``, optional for SSLPV's), if any."""
     fields = _fields(cls) or {}
-    for name in ("kind",):
+    for name in ("kind", "method"):
         if name in fields:
-            args = typing.get_args(fields[name].annotation)
-            if typing.get_origin(fields[name].annotation) is Literal and args:
+            ann, _ = _strip(fields[name].annotation)
+            args = typing.get_args(ann)
+            if typing.get_origin(ann) is Literal and args:
                 return args[0]
     return None
 

@@ -38,7 +38,8 @@ from harness.io.atomic import atomic_dir, atomic_write
 from harness.io.outputs import check_nightly_folder
 from harness.errors import InputError
 from harness.methods import config_label as method_label
-from harness.runs.params import any_product_model, check_products, config_label, param_lists_model, product_dict
+from harness.runs.params import any_product_model, check_methods, check_products, config_label, \
+    param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
 from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, image_change, judge_images, overall
 from harness.validation import InputModel, SweepSize, read_toml, validate
@@ -69,8 +70,11 @@ def load_matrix(path):
     from harness.runs.sweep import resolve_scenes
 
     path = Path(path)
-    m = validate(NightlyMatrix, read_toml(path, "a matrix file", "give the nightly matrix file "
-                                                "(harness/regression/nightly_matrix.toml)"), path)
+    data = read_toml(path, "a matrix file", "give the nightly matrix file (harness/regression/nightly_matrix.toml)")
+    if isinstance(data, dict):
+        check_methods(data.get("params", {}), path, "params")
+        check_methods(data.get("also", []), path, "also")
+    m = validate(NightlyMatrix, data, path)
     scenes = list_scenes() if m.scenes == "all" else resolve_scenes(m.scenes, where=path, field="scenes")
     products = []
     for i, table in enumerate([m.params, *m.also]):

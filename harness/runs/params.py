@@ -20,7 +20,7 @@ import dataclasses
 import functools
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import Field, create_model
+from pydantic import Discriminator, Field, Tag, create_model
 
 from harness.errors import InputError
 from harness.methods import DEFAULT_METHOD, METHOD_NAMES, get_method
@@ -56,9 +56,28 @@ def param_lists_model(keys="cli", method=DEFAULT_METHOD):
     return create_model(f"ParamLists_{method}_{keys}", __base__=InputModel, **fields)
 
 
+def _method_tag(value):
+    """The discriminator of :func:`any_product_model`: a product's ``method`` (none: SSLPV)."""
+    if isinstance(value, dict):
+        return value.get("method", DEFAULT_METHOD)
+    return getattr(value, "method", None) or DEFAULT_METHOD
+
+
+@functools.cache
 def any_product_model(keys="cli"):
-    """A product of any method (``method`` picks the model; none: SSLPV)."""
-    return Union[tuple(param_lists_model(keys, m) for m in METHOD_NAMES)]
+    """A product of any method: ``method`` picks the model (none: SSLPV's)."""
+    return Annotated[Union[tuple(Annotated[param_lists_model(keys, m), Tag(m)] for m in METHOD_NAMES)],
+                     Discriminator(_method_tag)]
+
+
+def check_methods(data, where, prefix):
+    """Every product of a raw file table (a dict, or a list of them) names a known method, or one line."""
+    items = data if isinstance(data, list) else [data]
+    for i, table in enumerate(items):
+        if isinstance(table, dict) and "method" in table and table["method"] not in METHOD_NAMES:
+            at = f"{prefix}[{i}]" if isinstance(data, list) else prefix
+            raise InputError(where, f"{at}.method", f"unknown method {table['method']!r}",
+                             "use one of: " + ", ".join(METHOD_NAMES))
 
 
 def product_dict(model):

@@ -86,8 +86,8 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from harness.io.atomic import atomic_write
 from harness.io.outputs import check_sweep_folder, check_writable, claim_sweep_folder
 from harness.errors import EnvironmentProblem, InputError
-from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, any_product_model, check_products, config_label, \
-    parse_lists, product_dict
+from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, any_product_model, check_methods, check_products, \
+    config_label, parse_lists, product_dict
 from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, SweepSize, read_json, validate
 
 from harness.reference.committed import sized_scene
@@ -149,6 +149,8 @@ class SweepConfig:
     def from_file(cls, path):
         """A ``sweep.json``, validated: types by the dataclass, values by SSLPVParams, scenes by the suite."""
         data = read_json(path, "a sweep.json", "give the sweep.json a sweep wrote")
+        if isinstance(data, dict):
+            check_methods(data.get("params", {}), path, "params")
         cfg = validate(cls, data, path, syntax="json")
         check_products(cfg.params, path, "params", keys="field")
         resolve_scenes(cfg.scenes, where=path)
