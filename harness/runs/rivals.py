@@ -2,8 +2,8 @@
 
 SSLPV configurations keep their step groups (:mod:`harness.runs.sweep`); a configuration of
 another method is a :class:`MethodConfig` (its method and validated parameters), rendered
-alone by :func:`harness.runs.worker.run_method` and recorded with its method, its
-precomputation and its work counts. A sweep product names its method
+alone by :func:`harness.runs.worker.run_method` and recorded (``harness.runs.sweep._record``) with
+its method, its precomputation and its work counts. A sweep product names its method
 (``{"method": "dipole", "gather": ["dense"], ...}``); one without a method is SSLPV's.
 """
 
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from harness.methods import DEFAULT_METHOD, get_method
 from harness.methods.params import expand, product_method
 
-__all__ = ["MethodConfig", "method_of", "expand_product", "check_scenes", "submit", "record"]
+__all__ = ["MethodConfig", "method_of", "expand_product", "check_scenes", "submit", "store_fields"]
 
 
 @dataclass(frozen=True)
@@ -55,22 +55,8 @@ def submit(client, worker_module, scene, size, config, ref_f, floors, priority, 
                          floors, key=key, pure=False, retries=2, priority=priority)
 
 
-def record(store, run_id, scene, config, key, res, out, refs, summary, exposure, write_render):
-    """Write one configuration's render folder, then its store row (method, precomputation, work)."""
-    render_dir = None
-    if res["status"] == "ok":
-        summary["gl_renderer"] = summary["gl_renderer"] or res["gl_renderer"]
-        render_dir = out / "renders" / scene.name / key[:16]
-        res.update(params=dict(config.as_dict(), method=config.method), scene=scene.name,
-                   scene_hash=scene.content_hash, exposure=exposure)
-        write_render(render_dir, res)
-        summary["ok"] += 1
-    else:
-        summary["failed"] += 1
-        summary.setdefault("first_error", f"{scene.name} {config.label()}: {res.get('error')}")
-    store.record_config(run_id, scene.name, scene.content_hash, config.as_dict(), res["status"],
-                        error=res.get("error"), metrics=res.get("metrics", []), timings=res.get("timings", {}),
-                        render_dir=str(render_dir) if render_dir else None, reference_dir=str(refs[scene.name]),
-                        diagnostics=res.get("diagnostics"), method=config.method,
-                        precompute=res.get("precompute"), work=res.get("work"),
-                        stages=get_method(config.method).stages)
+def store_fields(config):
+    """The store row's extra fields of a configuration: its method and stages (none for SSLPV's)."""
+    if method_of(config) == DEFAULT_METHOD:
+        return {}
+    return {"method": config.method, "stages": get_method(config.method).stages}

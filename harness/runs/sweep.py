@@ -601,8 +601,7 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
                         results = [{"status": "failed", "error": err} for _ in members]
                     if rivals.method_of(p) != "sslpv":     # another method's configuration (one result)
                         res = results if isinstance(results, dict) else results[0]
-                        rivals.record(store, run_id, s, p, members[0][1], res, out, refs, summary,
-                                      shared[s.name][2], _write_render)
+                        _record(store, run_id, s, p, members[0][1], res, out, refs, summary, shared[s.name][2])
                         bar.advance(failed=int(res["status"] != "ok"), detail=f"{s.name} {p.label()}")
                         continue
                     for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
@@ -624,18 +623,26 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
 
 
 def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
-    """Write one configuration's render folder, then its store row (one transaction)."""
+    """Write one configuration's render folder, then its store row (one transaction).
+
+    ``p`` is SSLPVParams, or another method's :class:`~harness.runs.rivals.MethodConfig`, whose row
+    also records its method and stages (:func:`harness.runs.rivals.store_fields`).
+    """
+    from harness.runs.rivals import store_fields
+
+    extra = store_fields(p)
     render_dir = None
     if res["status"] == "ok":
         summary["gl_renderer"] = summary["gl_renderer"] or res["gl_renderer"]
         render_dir = out / "renders" / s.name / key[:16]
-        res.update(params=p.as_dict(), scene=s.name, scene_hash=s.content_hash, exposure=exposure)
+        res.update(params=dict(p.as_dict(), **({"method": extra["method"]} if extra else {})), scene=s.name,
+                   scene_hash=s.content_hash, exposure=exposure)
         _write_render(render_dir, res)
         summary["ok"] += 1
     else:
         summary["failed"] += 1
-        summary.setdefault("first_error", f"{s.name} {config_label(p)}: {res.get('error')}")
-    store.record_config(run_id, s.name, s.content_hash, p.as_dict(), res["status"],
+        summary.setdefault("first_error", f"{s.name} {p.label() if extra else config_label(p)}: {res.get('error')}")
+    store.record_config(run_id, s.name, s.content_hash, p.as_dict(), res["status"], **extra,
                         error=res.get("error"), metrics=res.get("metrics", []),
                         timings=res.get("timings", {}),
                         render_dir=str(render_dir) if render_dir else None,
