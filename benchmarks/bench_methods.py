@@ -6,7 +6,9 @@ vertex gather at density 0.5 and range 2, as in the nightly matrix). Precomputat
 first render of a configuration); per frame = the sum of the frame stages (GL ms; host ms where the driver's
 timer queries miss compute work, ``dipole_gl/timing.py``), the median of ``--repeat`` renders after that.
 
-    .venv/bin/python benchmarks/bench_methods.py [--scenes a,b] [--size 64x64] [--repeat 3]
+    .venv/bin/python benchmarks/bench_methods.py [--scenes a,b] [--size small | 64x64] [--repeat 3]
+
+``--size small`` (the default): each scene at its committed small size (64x64, wide_slab 60x36).
 """
 
 import argparse
@@ -14,6 +16,7 @@ import statistics
 import time
 
 from harness.methods import get_method
+from harness.reference.committed import sized_scene
 from harness.scene import list_scenes, load_scene
 
 #: the nightly matrix's rival settings (the vertex gather's defaults exceed its table on apple_sphere)
@@ -31,18 +34,18 @@ def frame_ms(method, scene, params, repeat):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=None)
-    ap.add_argument("--size", default="64x64")
+    ap.add_argument("--size", default="small")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--sslpv-mapping", default="collision")
     args = ap.parse_args()
-    w, h = (int(v) for v in args.size.split("x"))
+    size = "small" if args.size == "small" else [int(v) for v in args.size.split("x")]
     names = args.scenes.split(",") if args.scenes else list_scenes()
     sslpv = get_method("sslpv")
     sp = sslpv.make_params(N=32, steps=32, mapping=args.sslpv_mapping)
     t0 = time.perf_counter()
     rows = []
     for name in names:
-        scene = load_scene(name).with_resolution(w, h)
+        scene = sized_scene(load_scene(name), size)
         _, s_frame, _ = frame_ms(sslpv, scene, sp, args.repeat)
         row = {"scene": name, "sslpv": s_frame}
         for kernel, kw in CONFIGS:
@@ -55,7 +58,7 @@ def main():
               + "; ".join(f"{k} pre {v[2]:.0f} ms, frame {v[3]:.1f} ms" for k, v in row.items()
                           if isinstance(v, tuple)), flush=True)
     keys = [f"{k}-{kw['gather']}" for k, kw in CONFIGS]
-    print(f"\nratios to SSLPV's per-frame time (N32 K32 {args.sslpv_mapping}), {w}x{h}, median of {args.repeat} frames, "
+    print(f"\nratios to SSLPV's per-frame time (N32 K32 {args.sslpv_mapping}), size {args.size}, median of {args.repeat} frames, "
           f"one run of {time.perf_counter() - t0:.0f} s")
     print("| scene | SSLPV ms/frame | " + " | ".join(f"{k} precomp. / frame" for k in keys) + " |")
     print("|---|---|" + "---|" * len(keys))

@@ -1,6 +1,6 @@
 """SSLPV against its rivals on the suite: subsurface relMSE and FLIP, with noise floors, per scene.
 
-Runs one sweep (Dask, the committed 64x64 references, so nothing is rendered with Mitsuba) with SSLPV over
+Runs one sweep (Dask, ``size = "small"``: the committed small references, 64x64 or wide_slab's 60x36, so nothing is rendered with Mitsuba) with SSLPV over
 N 16/32/64 x K 8/16/32/64 x mapping collision/diffusion and the dipole rivals (``dipole``, ``dirpole``; dense
 gather at the default spacing, and the vertex gather at its defaults), then prints, per scene:
 
@@ -60,7 +60,7 @@ def main():
         with Store(args.out / "store.sqlite") as st:
             run_id = st.runs()[-1]["id"]
     else:
-        cfg = SweepConfig(scenes=scenes, params=PRODUCTS, out=str(args.out), size=[64, 64])
+        cfg = SweepConfig(scenes=scenes, params=PRODUCTS, out=str(args.out), size="small")
         summary = run_sweep(cfg, workers=args.workers, progress=False)
         print(f"sweep: {summary['configurations']} configurations, {summary['ok']} ok, {summary['failed']} failed, "
               f"{summary['wall_s']} s")

@@ -208,3 +208,22 @@ class TestReportAndExport:
             rows = list(csv.DictReader(fh))
         assert n == len(rows) and {r["method"] for r in rows} == {"sslpv", "dipole", "dirpole"}
         assert {"ms_gather", "ms_shading", "work_json", "precompute_json"} <= set(rows[0])
+
+
+@pytest.mark.gl
+def test_rival_sweep_at_size_small_renders_each_scene_at_its_committed_size(tmp_path):
+    """``sweep --size small`` with a rival: wide_slab's rival renders at its committed 60x36, against the
+    committed reference (the rival's worker was once handed the string "small" as a size). One cheap vertex
+    gather on one worker (about 15 s, most of it the Dask cluster)."""
+    from harness.io import images as imageio
+    from harness.runs.sweep import SweepConfig, run_sweep
+
+    cfg = SweepConfig(scenes=["wide_slab"], params=[{"method": "dipole", "gather": ["vertex"], "density": [0.25],
+                                                     "range": [1.0]}], out=str(tmp_path / "s"), size="small")
+    summary = run_sweep(cfg, workers=1, progress=False)
+    with Store(summary["store"]) as st:
+        rows = st.configs(run_id=summary["run_id"])
+    assert [(r["method"], r["status"], r.get("error")) for r in rows] == [("dipole", "ok", None)]
+    sub = imageio.read_exr(Path(rows[0]["render_dir"]) / "subsurface.exr")["rgb"]
+    assert sub.shape[:2] == (36, 60), sub.shape
+    assert rows[0]["metrics"]["subsurface"]["relmse"]["value"] > 0

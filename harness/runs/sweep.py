@@ -545,15 +545,15 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
     def submit(i):
         s, p, members = groups[i]
         ref_f, floors, _ = shared[s.name]
+        size = [s.camera.width, s.camera.height] if cfg.size else None      # each scene's own ("small")
         if rivals.method_of(p) != "sslpv":     # before the SSLPV groups: a dense gather is often the longest task
-            pending[rivals.submit(client, sweep_worker, s, cfg.size, p, ref_f, floors, n_groups + 1,
+            pending[rivals.submit(client, sweep_worker, s, size, p, ref_f, floors, n_groups + 1,
                                   attempts[i])] = i
             return
         ks = [k for k, _ in members]
         tag = members[0][1] if len(members) == 1 else "group-" + members[0][1] + f"-{len(members)}"
         tag += f"-r{attempts[i]}" if attempts[i] else ""
         # Priority: groups come largest first; Dask runs higher priorities first.
-        size = [s.camera.width, s.camera.height] if cfg.size else None      # each scene's own ("small")
         fut = client.submit(sweep_worker.run_group, str(s.path), size, p.as_dict(), ks, ref_f, floors,
                             key=f"sslpv-{tag}", pure=False, retries=2, priority=n_groups - i)
         pending[fut] = i
