@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import quad
 
 from harness.scene import Boundary, Camera, Medium, PointLight, load_scene
-from harness.scene.geometry import build_mesh
+from harness.scene.geometry import BoxMesh, build_mesh
 from harness.scene.load import Scene, scene_hash
 from dipole_gl import kernels, twin
 from dipole_gl.medium import scene_material
@@ -61,7 +61,7 @@ def _slab_scene(alpha=0.9, sigma_tr=1.0, half=6.0, thick=1.0):
     """A 2 half x thick x 2 half slab (top face y = thick/2) of one homogeneous medium, lit by a distant light
     straight above (uniform irradiance at normal incidence), index-matched."""
     stp = sigma_tr / np.sqrt(3.0 * (1.0 - alpha))      # sigma_tr = sqrt(3 sigma_a sigma_t')
-    mesh = build_mesh({"kind": "box", "size": [2 * half, thick, 2 * half]}, "slab", None)
+    mesh = build_mesh(BoxMesh(kind="box", size=[2 * half, thick, 2 * half]), None)
     n = 4
     grid = lambda v: np.full((n, n, n, 3), v, dtype=np.float32)                       # noqa: E731
     medium = Medium(np.array([-half - 0.1, -half - 0.1, -half - 0.1]), np.array([half + 0.1] * 3), grid(stp),
