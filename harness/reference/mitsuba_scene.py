@@ -18,15 +18,20 @@ grid filter            ``nearest``: the reference sees exactly the scene's voxel
                        smooth the field and shift its values near the box faces.
 phase function         stock ``hg`` when g is one constant, else ``gridhg``
                        (:mod:`harness.reference.phase`) with the channel mean of g
-boundary               index-matched: ``null`` BSDF. dielectric: ``roughdielectric``, GGX,
-                       ``alpha = roughness``, ``int_ior = eta``, ``ext_ior = 1`` (see
+boundary               index-matched: ``null`` BSDF. Smooth dielectric (``roughness = 0``):
+                       ``dielectric``, ``int_ior = eta``, ``ext_ior = 1``, exact (see
+                       :data:`SMOOTH_DIELECTRIC_NOTE`). Rough dielectric: ``roughdielectric``,
+                       GGX, ``alpha = roughness``, ``int_ior = eta``, ``ext_ior = 1`` (see
                        :data:`DIELECTRIC_NOTE`)
 camera                 ``perspective``, ``fov_axis = "y"``, ``to_world = look_at(...)``,
                        ``hdrfilm`` RGB with a **box** filter (a pixel is the plain average over
                        its footprint, so seeds give independent, unweighted estimates)
 sampler                ``independent`` (seeded per render)
 integrator             ``volpath``, ``max_depth = -1`` (unbounded: no truncation bias),
-                       ``rr_depth = 5`` (Mitsuba's default; Russian roulette is unbiased)
+                       ``rr_depth = 5`` (Mitsuba's default; Russian roulette is unbiased);
+                       a smooth dielectric boundary: ``mneevolpath``
+                       (:mod:`harness.reference.mnee`, manifold next-event estimation through
+                       the interface) with the same depths and :data:`MNEE_PARAMS`
 lights                 ``point``, RGB intensity in W/sr; background black (no environment)
 =====================  ======================================================================
 """
@@ -49,7 +54,16 @@ DIELECTRIC_NOTE = (
     "vertices is disabled (sample_emitters=False) because the interface blocks it anyway "
     "(../shared/NOTES.md: same image, 4x faster)"
 )
+SMOOTH_DIELECTRIC_NOTE = (
+    "exact: smooth dielectric (Mitsuba 'dielectric', int_ior = eta, ext_ior = 1) rendered with mneevolpath, "
+    "volumetric path tracing plus manifold next-event estimation from every medium vertex to every point light "
+    "through the interface (Hanika et al. 2015); not covered, and lost (the image can only be darker): "
+    "connections crossing the interface more than once, further solutions of the constraint, failed walks "
+    "(harness/reference/mnee.py)"
+)
 INDEX_MATCHED_NOTE = "exact: index-matched boundary rendered with a null BSDF"
+#: Manifold-walk settings of the smooth-dielectric references, passed explicitly (recorded in reference.json).
+MNEE_PARAMS = {"newton_iterations": 32, "newton_tolerance": 1e-5, "ratio_tracking_scale": 2.0}
 RGB_G_NOTE = ("Mitsuba RGB variants trace one direction per path for all channels: the phase function uses "
               "the mean of the three channels of g")
 
@@ -83,9 +97,10 @@ def use_variant(variant=None):
     except (ImportError, AttributeError, RuntimeError) as exc:
         raise InputError("variant", variant, f"is not available on this machine ({exc})",
                          "use variant llvm_ad_rgb (CPU), or run on a machine with an NVIDIA GPU and driver") from exc
-    from . import phase
+    from . import mnee, phase
 
     phase.register()
+    mnee.register()
     return mi
 
 
@@ -139,7 +154,8 @@ def medium_dict(scene, albedo_override=None, phase="auto", filter_type=GRID_FILT
     """The ``heterogeneous`` interior medium of the object.
 
     ``sample_emitters`` (next-event estimation from medium vertices) defaults to
-    True for an index-matched boundary and False for a dielectric one.
+    True for an index-matched and a smooth dielectric boundary (where ``mneevolpath``
+    connects through the interface) and False for a rough dielectric one.
     """
     m = scene.medium
     albedo = m.albedo if albedo_override is None else np.broadcast_to(
@@ -149,17 +165,51 @@ def medium_dict(scene, albedo_override=None, phase="auto", filter_type=GRID_FILT
         "sigma_t": grid_volume(m.sigma_t, m.bbox_min, m.bbox_max, filter_type),
         "albedo": grid_volume(albedo, m.bbox_min, m.bbox_max, filter_type),
         "scale": 1.0,
-        # NEE from inside a non-null boundary is always occluded: skip it (see DIELECTRIC_NOTE).
-        "sample_emitters": bool(scene.boundary.index_matched if sample_emitters is None else sample_emitters),
+        # NEE from inside a rough boundary is always occluded: skip it (see DIELECTRIC_NOTE).
+        "sample_emitters": bool(not rough_dielectric(scene.boundary) if sample_emitters is None else sample_emitters),
         "phase": phase_dict(m, phase, filter_type),
     }
+
+
+def smooth_dielectric(boundary):
+    """A dielectric boundary with roughness 0: rendered exactly by ``mneevolpath``."""
+    return not boundary.index_matched and float(boundary.roughness) == 0.0
+
+
+def rough_dielectric(boundary):
+    """A dielectric boundary with roughness > 0: the GGX approximation of :data:`DIELECTRIC_NOTE`."""
+    return not boundary.index_matched and float(boundary.roughness) > 0.0
 
 
 def bsdf_dict(boundary):
     if boundary.index_matched:
         return {"type": "null"}
+    if smooth_dielectric(boundary):
+        return {"type": "dielectric", "int_ior": float(boundary.eta), "ext_ior": 1.0}
     return {"type": "roughdielectric", "distribution": "ggx", "alpha": float(boundary.roughness),
             "int_ior": float(boundary.eta), "ext_ior": 1.0}
+
+
+def integrator_dict(boundary, max_depth=MAX_DEPTH, rr_depth=RR_DEPTH):
+    """``volpath``, or ``mneevolpath`` with :data:`MNEE_PARAMS` behind a smooth dielectric."""
+    if smooth_dielectric(boundary):
+        return {"type": "mneevolpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth), **MNEE_PARAMS}
+    return {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+
+
+def absorber_is_black(scene):
+    """Why the albedo-0 image is exactly zero for ``scene`` (no surface light reaches the camera), or None.
+
+    Point lights and a black background: a null boundary reflects nothing, and a smooth
+    dielectric reflects a delta light only into a set of directions of measure zero, so
+    without scattering in the medium no light reaches the pinhole camera.
+    """
+    if scene.boundary.index_matched:
+        return "index-matched null boundary, black background, point lights only"
+    if smooth_dielectric(scene.boundary):
+        return ("smooth dielectric: the specular reflection of a point light is never seen by a pinhole camera; "
+                "black background, point lights only")
+    return None
 
 
 def mitsuba_mesh(mesh, bsdf=None, interior=None, name="object"):
@@ -204,19 +254,20 @@ def light_dicts(lights):
 
 def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, lights=True,
                      phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=RR_DEPTH,
-                     sample_emitters=None):
+                     sample_emitters=None, integrator=None):
     """Mitsuba ``load_dict`` dictionary for ``scene`` (the variant must be set: :func:`use_variant`).
 
     ``albedo_override`` replaces the albedo grid (0 gives the pure absorber whose
     image is subtracted to isolate subsurface light); ``extra_emitters`` maps
     names to emitter/shape dicts added as they are (validation scenes use area
     or environment emitters); ``lights=False`` drops the scene's point lights;
-    ``sample_emitters`` overrides the medium's next-event estimation (validation).
+    ``sample_emitters`` overrides the medium's next-event estimation (validation);
+    ``integrator`` replaces the integrator dict of :func:`integrator_dict` (validation).
     The seed is not part of the scene: it is passed to ``mi.render``.
     """
     d = {
         "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
+        "integrator": integrator or integrator_dict(scene.boundary, max_depth, rr_depth),
         "sensor": sensor_dict(scene.camera, spp),
         "object": mitsuba_mesh(scene.mesh, bsdf_dict(scene.boundary),
                                medium_dict(scene, albedo_override, phase, filter_type, sample_emitters)),
@@ -233,15 +284,18 @@ def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, li
 def scene_notes(scene):
     """Facts about the approximations made for ``scene``, for ``reference.json``."""
     _, spread = phase_g_grid(scene.medium)
+    b = scene.boundary
+    note = (INDEX_MATCHED_NOTE if b.index_matched else SMOOTH_DIELECTRIC_NOTE if smooth_dielectric(b)
+            else DIELECTRIC_NOTE)
     return {
-        "boundary": scene.boundary.kind,
-        "boundary_eta": float(scene.boundary.eta),
-        "boundary_roughness": float(scene.boundary.roughness),
-        "boundary_note": INDEX_MATCHED_NOTE if scene.boundary.index_matched else DIELECTRIC_NOTE,
+        "boundary": b.kind,
+        "boundary_eta": float(b.eta),
+        "boundary_roughness": float(b.roughness),
+        "boundary_note": note,
         "phase_note": RGB_G_NOTE,
         "g_channel_spread": spread,
         "grid_filter": GRID_FILTER,
-        "integrator": {"type": "volpath", "max_depth": MAX_DEPTH, "rr_depth": RR_DEPTH},
+        "integrator": integrator_dict(b),
         # What `[mesh] repair = "close-holes"` changed in the scene's mesh (None: the mesh as given).
         "mesh_repair": getattr(scene.mesh, "repair", None),
     }

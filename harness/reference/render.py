@@ -7,10 +7,13 @@ the mean of ``K`` independent renders (distinct ``seed``); the per-pixel
 standard error is ``std(ddof=1) / sqrt(K)`` per channel, and
 ``se_subsurface = sqrt(se_full^2 + se_absorber^2)`` (disjoint seeds).
 
-With an index-matched boundary (``null`` BSDF), a black background and only
-point lights, the absorber image is exactly zero (no surface reflection, camera
-rays that leave the object see black, and a delta light is never hit), so its
-pass is skipped and ``subsurface = full``; ``reference.json`` says so.
+With an index-matched boundary (``null`` BSDF) or a smooth dielectric one, a black
+background and only point lights, the absorber image is exactly zero (no surface
+reflection is ever seen: a delta light reflected by a delta interface reaches the
+pinhole with probability zero, camera rays that leave the object see black, and a delta
+light is never hit), so its pass is skipped and ``subsurface = full``; ``reference.json``
+says so (:func:`.mitsuba_scene.absorber_is_black`). The integrator is chosen by
+:func:`.mitsuba_scene.integrator_dict` (``mneevolpath`` behind a smooth dielectric).
 
 Choosing the sample count: unless ``spp`` is given, a pilot (4 seeds at
 ``PILOT_SPP``) measures the median relative standard error ``r_p`` of the
@@ -204,7 +207,8 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
     RENDER_COUNT += 1
     cam = scene.camera
     full = _Pass(mi, ms.build_scene_dict(scene, extra_emitters=extra_emitters), cam.width, cam.height)
-    absorber_needed = (not scene.boundary.index_matched) or bool(extra_emitters)
+    black_absorber = None if extra_emitters else ms.absorber_is_black(scene)
+    absorber_needed = black_absorber is None
     absorber = (_Pass(mi, ms.build_scene_dict(scene, albedo_override=0.0, extra_emitters=extra_emitters),
                       cam.width, cam.height) if absorber_needed else None)
     coverage = ms.coverage_mask(scene)
@@ -290,8 +294,7 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
         "seeds_absorber": seeds_abs,
         "seed_note": (f"mi.render seed = seed * {CHUNK_SEEDS} + chunk index (chunks of <= {MAX_LANES} samples in flight); "
                       "pilot seeds start at seed_base + %d, absorber seeds at seed_base + %d" % (SEED_STRIDE, 2 * SEED_STRIDE)),
-        "absorber_pass": ("rendered" if absorber else
-                          "skipped: exactly zero (index-matched null boundary, black background, point lights only)"),
+        "absorber_pass": "rendered" if absorber else f"skipped: exactly zero ({black_absorber})",
         "target_rel_se": float(target_rel_se),
         "median_rel_se_full": r_full,
         "median_rel_se_subsurface": r_sub,

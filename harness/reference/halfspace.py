@@ -1,0 +1,153 @@
+"""Single scattering in a homogeneous half-space under a flat smooth interface, in plain NumPy.
+
+An independent route to the image that ``mneevolpath`` (:mod:`harness.reference.mnee`)
+renders when it is limited to single scattering (``max_depth = 4``): nothing here uses
+Mitsuba, the manifold walk or its Jacobian.
+
+Setup: the medium fills ``y < 0`` (relative index ``eta`` > 1 to the vacuum above), a
+point light of intensity ``I`` (W/sr, RGB) at height ``h > 0`` above the interface and a
+pinhole camera above it. For a camera ray that meets the interface at ``P`` with cosine
+``cos_c``, the pixel sees (radiance leaving a medium of index eta is divided by eta^2)
+
+    L = T(cos_c) / eta^2 * int_0^inf exp(-sigma_t s) sigma_s p(cos_phase) I T(cos_o)
+        exp(-sigma_t l) E(s) ds,
+
+along the refracted ray ``x(s) = P + s d_t``, where for the point ``x(s)`` at depth ``z``
+and horizontal distance ``rho`` from the light's foot:
+
+* the refraction point toward the light solves ``rho = z tan(th_i) + h tan(th_o)`` with
+  ``sin(th_o) = eta sin(th_i)`` (one-dimensional by symmetry; solved by bisection, the
+  left side rising monotonically in ``th_i`` on ``[0, asin(1/eta))``);
+* ``l = z / cos(th_i)`` is the path inside the medium, ``T = 1 - F`` the unpolarised
+  Fresnel transmittance (:func:`fresnel_transmittance`);
+* ``E(s)`` is the irradiance per unit intensity on a plane perpendicular to the refracted
+  light ray, from the ray tube leaving the light in ``[th_o, th_o + d th_o] x [phi, phi +
+  d phi]``: power ``I sin(th_o) d th_o d phi`` lands on the horizontal area ``rho d rho
+  d phi`` at depth ``z``, so ``E = sin(th_o) / (rho cos(th_i) d rho / d th_o)`` with
+  ``d rho / d th_o = h / cos^2(th_o) + z / cos^2(th_i) * cos(th_o) / (eta cos(th_i))``;
+* ``p`` is Henyey-Greenstein with the cosine between the light's direction of travel at
+  ``x(s)`` and ``-d_t`` (toward the camera).
+
+The integral over ``s`` is Gauss-Legendre in ``u = 1 - exp(-sigma_ref s)``; pixels are
+averaged over ``sub x sub`` stratified rays (box filter, as the reference's film).
+:func:`image` has switches that plant the errors the validation test must catch.
+"""
+
+import numpy as np
+
+from harness.reference.mitsuba_scene import camera_rays
+
+
+def fresnel_transmittance(cos_outside, eta):
+    """1 - F for unpolarised light crossing a smooth interface, ``cos_outside`` on the vacuum side."""
+    c = np.clip(np.abs(cos_outside), 0.0, 1.0)
+    sin_t = np.sqrt(1.0 - c * c) / eta
+    cos_t = np.sqrt(np.maximum(1.0 - sin_t * sin_t, 0.0))
+    rs = (c - eta * cos_t) / (c + eta * cos_t)
+    rp = (eta * c - cos_t) / (eta * c + cos_t)
+    return 1.0 - 0.5 * (rs * rs + rp * rp)
+
+
+def henyey_greenstein(cos_theta, g):
+    """HG phase function of the cosine between the directions of travel before and after scattering."""
+    return (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * cos_theta) ** 1.5)
+
+
+def refraction_angle(rho, z, h, eta, iterations=24):
+    """Inside angle ``th_i`` with ``rho = z tan(th_i) + h tan(th_o)``, ``sin(th_o) = eta sin(th_i)``.
+
+    The left side rises monotonically on ``[0, asin(1/eta))``: Newton's method inside a
+    shrinking bracket (a bisection step whenever Newton would leave it).
+    """
+    lo = np.zeros_like(rho)
+    hi = np.full_like(rho, np.arcsin(1.0 / eta) * (1 - 1e-12))
+    th = np.arctan2(rho, z + eta * h) * 0 + 0.5 * hi
+    for _ in range(iterations):
+        s_o = eta * np.sin(th)
+        c_o = np.sqrt(1.0 - s_o * s_o)
+        f = z * np.tan(th) + h * s_o / c_o - rho
+        df = z / np.cos(th) ** 2 + h * eta * np.cos(th) / c_o ** 3
+        lo = np.where(f < 0, th, lo)
+        hi = np.where(f < 0, hi, th)
+        nxt = th - f / df
+        th = np.where((nxt > lo) & (nxt < hi), nxt, 0.5 * (lo + hi))
+    return th
+
+
+def image(camera, light_pos, intensity, eta, sigma_t, albedo, g, sub=8, nodes=96, fresnel_light=True,
+          geometry="tube", chunk=4096):
+    """Single-scattering image (H, W, 3) of the half-space ``y < 0`` (see the module docstring).
+
+    ``fresnel_light=False`` drops the Fresnel factor at the light's refraction and
+    ``geometry="straight"`` replaces the irradiance of the refracted ray tube by the
+    inverse square of the straight distance to the light: the planted errors of the test.
+    """
+    sigma_t = np.asarray(sigma_t, float)
+    albedo = np.asarray(albedo, float)
+    intensity = np.asarray(intensity, float)
+    light = np.asarray(light_pos, float)
+    h = light[1]
+    if h <= 0:
+        raise ValueError("halfspace.image: the light must lie above the interface (y > 0)")
+    grid = (np.arange(sub) + 0.5) / sub
+    offsets = np.stack(np.meshgrid(grid, grid, indexing="xy"), -1).reshape(-1, 2)
+    o, d = camera_rays(camera, offsets)                        # (H, W, S, 3)
+    H, W, S, _ = d.shape
+    d = d.reshape(-1, 3)
+    down = d[:, 1] < 0
+    t_hit = np.where(down, -o[1] / np.where(down, d[:, 1], -1.0), np.nan)
+    p_hit = np.where(down[:, None], o + np.nan_to_num(t_hit)[:, None] * d, 0.0)
+    cos_c = -d[:, 1]
+    # Refracted camera ray (normal +y): d_t = d / eta + (cos_c / eta - cos_t) n.
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - cos_c ** 2) / eta ** 2, 0.0))
+    d_t = d / eta
+    d_t[:, 1] += cos_c / eta - cos_t
+    d_t /= np.linalg.norm(d_t, axis=1, keepdims=True)
+
+    sigma_ref = sigma_t.min()
+    xu, wu = np.polynomial.legendre.leggauss(nodes)
+    u = 0.5 * (xu + 1.0)
+    wu = 0.5 * wu
+    s = -np.log1p(-u) / sigma_ref                               # (N,)
+    ds_du = 1.0 / (sigma_ref * (1.0 - u))
+
+    L = np.zeros((len(d), 3))
+    for lo in range(0, len(d), chunk):                          # bounded memory: rays in chunks
+        sl = slice(lo, lo + chunk)
+        L[sl] = _along_rays(p_hit[sl], d_t[sl], s, ds_du * wu, light, h, eta, sigma_t, albedo, g, intensity,
+                            fresnel_light, geometry)
+    L *= (fresnel_transmittance(cos_c, eta) / eta ** 2)[:, None]
+    L[~down] = 0.0
+    return L.reshape(H, W, S, 3).mean(axis=2)
+
+
+def _along_rays(p_hit, d_t, s, weights, light, h, eta, sigma_t, albedo, g, intensity, fresnel_light, geometry):
+    """The integral over s of the in-scattered light for refracted rays ``p_hit + s d_t`` (R, 3) -> (R, 3)."""
+    x = p_hit[:, None, :] + s[None, :, None] * d_t[:, None, :]  # (R, N, 3)
+    z = -x[..., 1]
+    foot = x[..., [0, 2]] - light[[0, 2]]
+    rho = np.linalg.norm(foot, axis=-1)
+    th_i = refraction_angle(rho, z, h, eta)
+    sin_i, cos_i = np.sin(th_i), np.cos(th_i)
+    sin_o = eta * sin_i
+    cos_o = np.sqrt(np.maximum(1.0 - sin_o ** 2, 0.0))
+    path_in = z / cos_i
+    if geometry == "tube":
+        drho = h / cos_o ** 2 + z / cos_i ** 2 * cos_o / (eta * cos_i)
+        e_perp = sin_o / (np.maximum(rho, 1e-300) * cos_i * drho)
+    elif geometry == "straight":
+        e_perp = 1.0 / np.sum((x - light) ** 2, axis=-1)
+    else:
+        raise ValueError(f"halfspace.image: unknown geometry {geometry!r}")
+    # Direction of travel of the refracted light at x(s): away from the light's foot, downward.
+    e_h = foot / np.maximum(rho, 1e-300)[..., None]
+    travel = np.stack([sin_i * e_h[..., 0], -cos_i, sin_i * e_h[..., 1]], axis=-1)
+    cos_phase = np.einsum("rnk,rk->rn", travel, -d_t)
+    phase = henyey_greenstein(cos_phase, g)
+    t_light = fresnel_transmittance(cos_o, eta) if fresnel_light else np.ones_like(cos_o)
+    geo = phase * t_light * e_perp * weights[None, :]           # (R, N)
+    out = np.empty((len(p_hit), 3))
+    for c in range(3):
+        att = np.exp(-sigma_t[c] * (s[None, :] + path_in))
+        out[:, c] = (geo * att).sum(axis=1) * sigma_t[c] * albedo[c] * intensity[c]
+    return out
