@@ -33,9 +33,54 @@ averaged over ``sub x sub`` stratified rays (box filter, as the reference's film
 :func:`image` has switches that plant the errors the validation test must catch.
 """
 
+import dataclasses
+
 import numpy as np
 
 from harness.reference.mitsuba_scene import camera_rays
+from harness.scene import Boundary, Camera, Medium, PointLight, Scene, scene_hash
+from harness.scene.geometry import build_mesh
+
+#: The validation setup: a camera looking down at the interface y = 0 at about 40 degrees, a
+#: point light to the back left, a chromatic medium (sigma_t per colour, HG g = 0.3). The
+#: half-space is a 12 x 4 x 12 box (a camera ray reaches depth 4 with transmittance <= e^-4 and
+#: the light's path back adds as much again: the finite box changes the image by < 1e-6).
+SETUP = {"origin": (0.0, 1.5, 1.8), "target": (0.0, 0.0, 0.0), "fov_y": 40.0,
+         "light": (-1.2, 0.6, 1.0), "intensity": (2.0, 2.0, 2.0),
+         "sigma_t": (1.0, 1.6, 2.4), "albedo": (0.8, 0.7, 0.6), "g": 0.3,
+         "half_width": 6.0, "depth": 4.0}
+
+
+def validation_scene(eta, size=24, setup=SETUP):
+    """The :data:`SETUP` half-space as a harness :class:`~harness.scene.Scene` behind a smooth dielectric.
+
+    ``eta = 1`` gives the index-matched scene. The medium is a one-voxel constant grid
+    (so the reference renders it as ``heterogeneous``, with null collisions and ratio
+    tracking); the box is flat-shaded, its top face the interface.
+    """
+    w, depth = setup["half_width"], setup["depth"]
+    mesh = build_mesh({"kind": "box", "size": [2 * w, depth, 2 * w], "center": [0.0, -depth / 2, 0.0]},
+                      "halfspace", None)
+    cam = Camera(origin=setup["origin"], target=setup["target"], up=(0.0, 1.0, 0.0), fov_y_deg=setup["fov_y"],
+                 width=int(size), height=int(size))
+
+    def grid(v):
+        return np.broadcast_to(np.asarray(v, np.float32), (1, 1, 1, 3)).copy()
+
+    medium = Medium(np.full(3, -w), np.full(3, w), grid(setup["sigma_t"]), grid(setup["albedo"]),
+                    grid([setup["g"]] * 3))
+    boundary = Boundary("index-matched") if eta == 1.0 else Boundary("dielectric", float(eta), 0.0)
+    scene = Scene(name="halfspace", path=None, units="cm", description="single-scattering validation half-space",
+                  mesh=mesh, camera=cam, lights=(PointLight(setup["light"], setup["intensity"]),),
+                  boundary=boundary, medium=medium)
+    return dataclasses.replace(scene, content_hash=scene_hash(scene))
+
+
+def setup_image(scene, **kwargs):
+    """:func:`image` of a :func:`validation_scene` (its camera, light, eta and medium)."""
+    m, light = scene.medium, scene.lights[0]
+    return image(scene.camera, light.position, light.intensity, scene.boundary.eta, m.sigma_t[0, 0, 0],
+                 m.albedo[0, 0, 0], float(m.g[0, 0, 0, 0]), **kwargs)
 
 
 def fresnel_transmittance(cos_outside, eta):

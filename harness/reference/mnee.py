@@ -34,12 +34,19 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - Add three AOV channels per pixel: manifold walks started, walks converged, walks
        converged into a visible, transmissive connection (sums over the path's vertices,
        averaged over samples). Default: false
+   * - probe_seeds
+     - |int|
+     - Diagnostics (with ``stats``): after each walk, this many more walks from random
+       seeds; four more AOV channels: vertices where only a probe found a connection, and
+       the RGB light of the solutions the main walk missed (not added to the image; a
+       lower bound of the energy lost to failed walks and further solutions). Default: 0
 
 What it renders
 ---------------
 The light transport of ``volpath``: delta tracking with null collisions in heterogeneous
-media (the real-collision probability is the mean over colour channels of
-sigma_t / majorant, as Mitsuba's ``prbvolpath``), phase-function and BSDF sampling,
+media (spectral tracking: the real-collision probability is ``mean(beta sigma_t) /
+mean(beta (sigma_t + sigma_n))`` over the colour channels, Kutz et al. 2017, so
+that the weights stay bounded in chromatic media), phase-function and BSDF sampling,
 next-event estimation from medium vertices and from non-delta surfaces with ratio-tracked
 transmittance through null (index-matched) interfaces, emitter hits with multiple
 importance sampling, Russian roulette. Camera-side refraction stays as the smooth
@@ -116,12 +123,13 @@ import mitsuba as mi  # noqa: E402
 
 PLUGIN_NAME = "mneevolpath"
 DEFAULTS = {"max_depth": -1, "rr_depth": 5, "newton_iterations": 32, "newton_tolerance": 1e-5,
-            "ratio_tracking_scale": 2.0, "stats": False}
+            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0}
 MIN_STEP = 1e-4            # smallest Newton step factor beta before a walk is given up
 MIN_DET = 1e-12            # |det J| below this is treated as singular
 POSITION_EPS = 1e-6        # float32 error of a surface point's position (relative to max(|x1|, 1)), ~8 ulp
 PLANE_SWITCH = 0.05        # |C| above which a walk step solves the tangent-plane refraction instead
 STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected")
+PROBE_AOVS = ("mnee_probe_rescued", "mnee_probe_missed_r", "mnee_probe_missed_g", "mnee_probe_missed_b")
 
 
 # --------------------------------------------------------------------------- vertex math
@@ -283,11 +291,15 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         if not self.ratio_tracking_scale >= 1.0:
             raise ValueError(f"{PLUGIN_NAME}: ratio_tracking_scale = {self.ratio_tracking_scale} must be >= 1")
         self.stats = bool(get("stats"))
+        self.probe_seeds = int(get("probe_seeds"))
+        if self.probe_seeds < 0 or (self.probe_seeds and not self.stats):
+            raise ValueError(f"{PLUGIN_NAME}: probe_seeds = {self.probe_seeds} must be >= 0 and needs stats = true")
         self._eta_table = None
-        self._prepared_for = None
 
     def aov_names(self):
-        return list(STATS_AOVS) if self.stats else []
+        if not self.stats:
+            return []
+        return list(STATS_AOVS) + (list(PROBE_AOVS) if self.probe_seeds else [])
 
     def to_string(self):
         return (f"MNEEVolpathIntegrator[max_depth = {self.max_depth}, rr_depth = {self.rr_depth}, "
@@ -296,9 +308,11 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
     # ------------------------------------------------------------------ scene tables
 
     def _prepare(self, scene):
-        """Relative index of refraction per shape (registry id), 0 where no manifold connection applies."""
-        if self._prepared_for is scene:
-            return
+        """Relative index of refraction per shape (registry id), 0 where no manifold connection applies.
+
+        Built at every ``sample`` call (a handful of shapes): holding on to the scene would
+        tie the integrator's lifetime to it.
+        """
         ids, etas = [0], [0.0]
         for shape in scene.shapes():
             bsdf = shape.bsdf()
@@ -313,7 +327,6 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         table = dr.zeros(mi.Float, max(ids) + 1)
         dr.scatter(table, mi.Float(etas), mi.UInt32(ids))
         self._eta_table = table
-        self._prepared_for = scene
 
     def _shape_eta(self, shape, active):
         sid = dr.reinterpret_array(mi.UInt32, shape)
@@ -446,15 +459,42 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             walking &= beta >= MIN_STEP
         return converged, (p, n, ng, dp_du, dp_dv, dn_du, dn_dv), omega, dist, iteration, residual
 
-    def _connect(self, scene, sampler, mei, medium, active, allow_manifold):
+    def _manifold_value(self, scene, sampler, x0, y, si_seed, omega_seed, eta, emitter, u2, sel_weight, medium,
+                        active):
+        """One walk from a seed and, where it ends in a visible transmissive solution, its light at ``x0``.
+
+        Returns ``(converged, connected, value, direction, x1)``: ``value`` is the
+        irradiance at ``x0`` along ``direction`` divided by the light's selection density
+        (``I T Tr G / p_select``, module docstring steps 3-5).
+        """
+        converged, vertex, omega, dist, _, _ = self._walk(scene, x0, y, si_seed, omega_seed, eta, active)
+        p, n, ng, dp_du, dp_dv, dn_du, dn_dv = vertex
+        g, aux = generalized_geometry(-omega, dist, y, p, n, ng, dp_du, dp_dv, dn_du, dn_dv, eta)
+        wo = aux["wo"]
+        conn = converged & (g > 0) & (dr.dot(n, wo) > 0) & (dr.dot(ng, wo) > 0)
+        it1 = dr.zeros(mi.Interaction3f)
+        it1.p = p
+        it1.n = ng
+        it1.t = 0.0
+        conn &= ~scene.ray_test(it1.spawn_ray_to(y), conn)
+        ds1, em1 = emitter.sample_direction(it1, u2, conn)
+        intensity = em1 * dr.square(ds1.dist)         # point/spot value is I(w) / r^2 (pdf 1)
+        fresnel_r, _, _, _ = mi.fresnel(dr.dot(n, wo), eta)
+        tr = self._ratio_track(medium, x0, p, sampler, conn)
+        value = dr.select(conn, sel_weight * intensity * (1.0 - fresnel_r) * g * tr, 0.0)
+        return converged, conn, value, omega, p
+
+    def _connect(self, scene, sampler, mei, medium, active, allow_manifold, phase_value):
         """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
 
         ``allow_manifold`` says where the two segments of a manifold connection still fit
         into ``max_depth``; where they do not, an eligible vertex gets no connection at all
-        (a straight one would be blocked by the interface). Returns ``(value, direction, pdf, stats)``: the light arriving at ``mei`` along
+        (a straight one would be blocked by the interface). ``phase_value(direction)`` is
+        the phase function toward a direction (used by the probe seeds). Returns
+        ``(value, direction, pdf, stats)``: the light arriving at ``mei`` along
         ``direction`` divided by its sampling density (times the phase function gives the
-        contribution), the solid-angle pdf used for MIS (0 for delta lights), and the walk
-        counters (started, converged, connected).
+        contribution), the solid-angle pdf used for MIS (0 for delta lights), and the
+        :data:`STATS_AOVS` of this vertex.
         """
         idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
         emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
@@ -480,26 +520,45 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
 
         # ---- manifold connection through the interface
         y = ds.p
-        converged, vertex, omega, dist, _, _ = self._walk(scene, mei.p, y, si0, ds.d, eta, manifold)
-        p, n, ng, dp_du, dp_dv, dn_du, dn_dv = vertex
-        g, aux = generalized_geometry(-omega, dist, y, p, n, ng, dp_du, dp_dv, dn_du, dn_dv, eta)
-        wo = aux["wo"]
-        conn = converged & (g > 0) & (dr.dot(n, wo) > 0) & (dr.dot(ng, wo) > 0)
-        it1 = dr.zeros(mi.Interaction3f)
-        it1.p = p
-        it1.n = ng
-        it1.t = 0.0
-        conn &= ~scene.ray_test(it1.spawn_ray_to(y), conn)
-        ds1, em1 = emitter.sample_direction(it1, u2, conn)
-        intensity = em1 * dr.square(ds1.dist)         # point/spot value is I(w) / r^2 (pdf 1)
-        fresnel_r, _, _, _ = mi.fresnel(dr.dot(n, wo), eta)
-        tr1 = self._ratio_track(medium, mei.p, p, sampler, conn)
-        value[conn] = sel_weight * intensity * (1.0 - fresnel_r) * g * tr1
+        converged, conn, m_value, omega, x1 = self._manifold_value(scene, sampler, mei.p, y, si0, ds.d, eta, emitter,
+                                                                   u2, sel_weight, medium, manifold)
+        value[conn] = m_value
         direction[conn] = omega
         pdf[eligible] = 0.0
-        stats = mi.Vector3f(dr.select(manifold, 1.0, 0.0), dr.select(manifold & converged, 1.0, 0.0),
-                            dr.select(conn, 1.0, 0.0))
+        stats = [dr.select(manifold, 1.0, 0.0), dr.select(converged, 1.0, 0.0), dr.select(conn, 1.0, 0.0)]
+        if self.probe_seeds:
+            stats += self._probe(scene, sampler, mei.p, y, ds.d, eta, emitter, u2, sel_weight, medium, manifold,
+                                 conn, x1, phase_value)
         return value, direction, pdf, stats
+
+    def _probe(self, scene, sampler, x0, y, to_light, eta, emitter, u2, sel_weight, medium, active, conn, x1,
+               phase_value):
+        """Diagnostics: walks from ``probe_seeds`` random seeds; the light of the solutions the main walk missed.
+
+        Each seed is the first surface point along a direction drawn uniformly from the
+        hemisphere around the direction to the light. A converged, connected solution more
+        than ``1e-4 max(|x1|, 1)`` away from every solution found before (the main one
+        included) is new: its contribution (times the phase function) is added to the
+        missed light, a lower bound of the energy the single walk loses to failed walks
+        and further solutions. Returns the ``mnee_probe_*`` AOVs.
+        """
+        frame = mi.Frame3f(to_light)
+        found = [(x1, conn)]
+        missed = mi.Spectrum(0.0)
+        rescued = mi.Bool(False)
+        for _ in range(self.probe_seeds):
+            d = frame.to_world(mi.warp.square_to_uniform_hemisphere(sampler.next_2d(active)))
+            si = scene.ray_intersect(mi.Ray3f(x0, d), WALK_FLAGS, active)
+            seeded = active & si.is_valid() & (self._shape_eta(si.shape, active & si.is_valid()) > 0)
+            _, conn_k, value_k, omega_k, x_k = self._manifold_value(scene, sampler, x0, y, si, d, eta, emitter, u2,
+                                                                  sel_weight, medium, seeded)
+            new = mi.Bool(conn_k)
+            for x_j, ok_j in found:
+                new &= ~ok_j | (dr.norm(x_k - x_j) > 1e-4 * dr.maximum(dr.max(dr.abs(x_k)), 1.0))
+            missed[new] += value_k * phase_value(omega_k, new)
+            rescued |= new & ~conn
+            found.append((x_k, conn_k))
+        return [dr.select(rescued, 1.0, 0.0), missed[0], missed[1], missed[2]]
 
     # ------------------------------------------------------------------ path tracing
 
@@ -519,7 +578,7 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         prev_pdf = mi.Float(1.0)
         specular_chain = mi.Bool(True)             # no MIS for hits after the camera / a delta vertex
         valid_ray = mi.Bool(False)
-        counters = mi.Vector3f(0.0)
+        counters = [mi.Float(0.0) for _ in self.aov_names()]
         # One channel drives free-flight sampling (Mitsuba's RGB convention).
         channel = mi.UInt32(dr.minimum(3.0 * sampler.next_1d(active), 2.0))
 
@@ -547,7 +606,11 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             beta[in_medium] *= dr.select(tr_pdf > 0, tr / tr_pdf, 0.0)
             escaped = in_medium & ~mei.is_valid()
             in_medium &= mei.is_valid()
-            p_real = dr.mean(mei.sigma_t / mei.combined_extinction)
+            # Spectral tracking with history-aware probabilities (Kutz et al. 2017, Sec. 4): the
+            # channel sum of the throughput never grows, so chromatic media stay free of fireflies.
+            w_real = dr.mean(beta * mei.sigma_t)
+            w_null = dr.mean(beta * mei.sigma_n)
+            p_real = w_real / (w_real + w_null)
             null = in_medium & (sampler.next_1d(in_medium) >= p_real)
             real = in_medium & ~null
             beta[null] *= mei.sigma_n / (1.0 - p_real)
@@ -563,9 +626,13 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             phase = mei.medium.phase_function()
             nee = real & mei.medium.use_emitter_sampling()
             # A manifold connection needs two more segments, a straight one one.
-            value, direction, nee_pdf, stats = self._connect(scene, sampler, mei, medium, nee,
-                                                             depth + 1 < self.max_depth)
-            counters += stats
+            value, direction, nee_pdf, stats = self._connect(
+                scene, sampler, mei, medium, nee, depth + 1 < self.max_depth,
+                lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
+            # Per-vertex counts; the missed light of the probes (AOVs 4-6) carries the throughput.
+            weights = [1.0, 1.0, 1.0, 1.0, beta[0], beta[1], beta[2]]
+            for k in range(len(counters)):
+                counters[k] += dr.select(nee, stats[k] * weights[k], 0.0)
             phase_val, phase_pdf = phase.eval_pdf(phase_ctx, mei, direction, nee)
             L[nee] += beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
 
@@ -626,8 +693,7 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             medium[crossing] = si.target_medium(ray.d)
             active &= on_surface | in_medium
 
-        aovs = [counters.x, counters.y, counters.z] if self.stats else []
-        return L, valid_ray, aovs
+        return L, valid_ray, counters
 
 
 _REGISTERED = set()
