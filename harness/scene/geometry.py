@@ -275,6 +275,9 @@ def check_closed(vertices, faces, repaired=False, file=False):
             raise FieldProblem((), f"is still not closed after repair = \"close-holes\" ({state}; holes of more "
                                f"than {MAX_HOLE_EDGES} edges and non-manifold parts are not repaired)",
                                "repair the mesh in MeshLab or Blender, so inside and outside are defined")
+        if topo["boundary_edges"] == 0:          # closed, but edges shared by more than two faces
+            raise FieldProblem((), f"is not two-manifold ({state})", "split or remove the non-manifold edges, e.g. "
+                               "with MeshLab's 'Repair non Manifold Edges', so inside and outside are defined")
         fix = ("add repair = \"close-holes\" to [mesh], or close the holes in MeshLab" if file else
                "close the holes, e.g. with MeshLab's 'Close Holes'")
         raise FieldProblem((), f"is not closed ({state})", f"{fix}, so inside and outside are defined")

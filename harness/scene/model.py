@@ -7,6 +7,7 @@ type and range (unknown keys, strings for numbers, NaN and infinities are refuse
 :mod:`harness.scene.fields`), and then checks what no single field's type can say:
 
 * the mesh is closed (``[mesh]``'s validator);
+* a dielectric boundary's ``eta`` is a supported refractive index (:func:`dielectric_rules`);
 * the medium box is a cube larger than zero, and every grid value is in range
   (``[medium]``'s validator, on the evaluated grids);
 * the camera's up vector is not parallel to its viewing direction (``[camera]``);
@@ -27,7 +28,8 @@ from harness.scene.geometry import MeshSpec, points_inside
 from harness.validation import FieldProblem, ImageSize, InputModel, NonNegative, Vec3
 
 __all__ = ["SceneFile", "CameraSpec", "LightSpec", "IndexMatchedBoundary", "DielectricBoundary", "BoundarySpec",
-           "MediumSpec", "Tolerances", "json_schema", "schema_text", "BOUNDARY_KINDS"]
+           "MediumSpec", "Tolerances", "json_schema", "schema_text", "BOUNDARY_KINDS", "ETA_RANGE",
+           "dielectric_rules"]
 
 BOUNDARY_KINDS = ("index-matched", "dielectric")
 #: Each grid's allowed range: (low, high, low open, high open).
@@ -78,14 +80,46 @@ class IndexMatchedBoundary(InputModel):
     kind: Literal["index-matched"]
 
 
+#: Relative index of refraction (inside / outside) a dielectric boundary may have: above 1
+#: (1 is index-matched; a medium less dense than its surroundings is not supported) up to 3.
+ETA_RANGE = (1.0, 3.0)
+
+
+def dielectric_rules(eta, roughness):
+    """The rules of a dielectric boundary that no field type states; raises :class:`FieldProblem`.
+
+    ``eta <= 0`` is no refractive index; ``eta = 1`` with ``roughness = 0`` is an
+    index-matched boundary; otherwise ``eta`` must lie in :data:`ETA_RANGE`. A smooth
+    boundary (``roughness = 0``, rendered exactly by ``harness.reference.mnee``) needs the
+    closed two-manifold mesh that ``[mesh]``'s validator asks of every scene.
+    """
+    if eta <= 0:
+        raise FieldProblem("eta", f"eta = {eta:g} is not a refractive index (must be > 0)",
+                           "give the medium's index relative to the outside, e.g. 1.4 (skin) or 1.6 (jade)")
+    if eta == 1.0 and roughness == 0.0:
+        raise FieldProblem("eta", "eta = 1 with roughness = 0 is an index-matched boundary",
+                           'use kind = "index-matched"')
+    lo, hi = ETA_RANGE
+    if not lo < eta <= hi:
+        raise FieldProblem("eta", f"eta = {eta:g} is outside the supported range ({lo:g}, {hi:g}]",
+                           'use kind = "index-matched" for eta = 1; media less dense than the outside (eta < 1) '
+                           "are not supported")
+
+
 class DielectricBoundary(InputModel):
-    """A dielectric interface of index ``eta`` (the reference uses a rough GGX interface)."""
+    """A dielectric interface of relative index ``eta``: smooth (``roughness = 0``: the exact
+    reference, ``mneevolpath``) or rough (GGX alpha > 0: the reference approximates with
+    Mitsuba's ``roughdielectric``)."""
 
     kind: Literal["dielectric"]
-    eta: Annotated[float, Field(gt=1.0, le=3.0)] = Field(description="relative index of refraction",
-                                                         examples=[1.4])
-    roughness: Annotated[float, Field(gt=0.0, le=1.0)] = Field(0.1, description="GGX alpha of the interface",
-                                                               examples=[0.2])
+    eta: float = Field(description="relative index of refraction (inside / outside), in (1, 3]", examples=[1.4])
+    roughness: Annotated[float, Field(ge=0.0, le=1.0)] = Field(
+        0.1, description="GGX alpha of the interface; 0 is a smooth interface (exact reference)", examples=[0.0])
+
+    @model_validator(mode="after")
+    def _supported(self):
+        dielectric_rules(self.eta, self.roughness)
+        return self
 
 
 #: ``[boundary]``; a new kind is one more model in this union (and in :data:`BOUNDARY_KINDS`).
