@@ -49,8 +49,8 @@ precision); the framebuffers of the raster passes are
 Limits
 ------
 * At most :data:`MAX_LIGHTS` point lights; cubic LPV cells.
-* Direct reflection is the GGX reflection half of a rough dielectric; the
-  smooth limit (roughness 0) is not representable with point lights.
+* Direct reflection is the GGX reflection half of a rough dielectric; a smooth
+  one (roughness 0) reflects nothing a pinhole camera sees from point lights.
 * The medium outside the mesh follows ``params.outside``.
 """
 

@@ -21,9 +21,9 @@
 The accumulation grid is looked up per cell (``lookup="cell"``, NEAREST, as the
 paper) or trilinearly (``lookup="trilinear"``, LINEAR); the ``lookup`` is a
 define of the program and sets the grid textures' filter. Direct reflection is
-the GGX reflection half of a rough dielectric; the smooth limit (roughness 0)
-is not representable with point lights. An index-matched boundary reflects
-nothing (``u_n_lights = 0``).
+the GGX reflection half of a rough dielectric. An index-matched boundary and a
+smooth one (roughness 0, whose mirror image of a point light the pinhole never
+sees) reflect nothing (``u_n_lights = 0``), as in the reference.
 """
 
 from __future__ import annotations
@@ -87,7 +87,8 @@ def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, 
     set_(prog, "u_alpha", float(b.roughness))
     set_(prog, "u_cam_pos", tuple(map(float, cam.origin)))
     n = len(scene.lights)
-    set_(prog, "u_n_lights", 0 if b.index_matched else n)
+    # A smooth interface reflects a point light only into a set of directions of measure zero.
+    set_(prog, "u_n_lights", 0 if b.index_matched or float(b.roughness) == 0.0 else n)
     set_light_uniforms(prog, scene, views, params.rsm_size, MAX_LIGHTS)
     vao.render(ctx.TRIANGLES)
 
