@@ -1,0 +1,225 @@
+"""The exact smooth-dielectric reference (``mneevolpath``): agreement, limits, failures and cost.
+
+Parts (``--part``, default all but ``time``, ``rough`` and ``eta2``, which take longest):
+
+``halfspace``   test 1 at a larger budget: single scattering in the validation half-space
+                (:mod:`harness.reference.halfspace`), eta 1.33 and 1.5, 32 x 32, K = 16 x 128
+                spp, against the NumPy route: z-statistics, image mean, planted errors.
+``eta1``        test 2: eta = 1.0001 against index-matched ``volpath`` (jade_veins, 32 x 32).
+``area-limit``  test 3's sequence: stock ``volpath`` with a sphere light of radius r
+                (radiance I / (pi r^2)) behind the grey half-space over the point-light image,
+                r = 0.4, 0.25, 0.15, 0.1.
+``rough``       report only: GGX ``roughdielectric`` with alpha = 0.2, 0.1, 0.05 against the
+                exact image of the same scene (skin_torus_dielectric, 32 x 32): energy ratio,
+                relative MSE, and the rough image's own noise.
+``failures``    the manifold walks on every smooth scene of the suite and the half-space
+                (64 x 64, ``stats`` with 4 probe seeds): share of walks started that converge
+                and connect, share rescued by a probe, and the light the probes found that the
+                main walk missed (a lower bound of the energy lost), per channel.
+``time``        the time to reach each smooth scene's noise target (``reference_rel_se``) at
+                128 x 128 with ``render_reference`` (pilot and top-ups, measured, not
+                extrapolated), against the index-matched version of the same scene, in one run.
+``eta2``        SSLPV with ``eta2`` off and on against the exact committed 64 x 64 references
+                of the smooth scenes: energy ratio and relMSE of the subsurface image.
+
+Usage: ``.venv/bin/python benchmarks/bench_mnee.py [--part halfspace eta1 ...] [--variant cuda_ad_rgb]``.
+Every figure in the README's section on the exact dielectric reference is printed by this script.
+"""
+
+import argparse
+import dataclasses
+import tempfile
+import time
+
+import numpy as np
+
+from harness.reference import halfspace
+from harness.reference import mitsuba_scene as ms
+from harness.scene import Boundary, list_scenes, load_scene
+
+SMOOTH_SCENES = [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
+
+
+def stack(mi, d, seeds, spp):
+    scene = mi.load_dict(d)
+    t = time.perf_counter()
+    out = np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
+    return out, time.perf_counter() - t
+
+
+def fmt(a, digits=4):
+    return "[" + ", ".join(f"{v:.{digits}f}" for v in np.ravel(a)) + "]"
+
+
+# --------------------------------------------------------------------------- parts
+
+def part_halfspace(mi, args):
+    print("test 1: single scattering in the half-space against NumPy (32 x 32, K = 16 x 128 spp)")
+    for eta in (1.33, 1.5):
+        scene = halfspace.validation_scene(eta, size=32)
+        st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=4), range(16), 128)
+        mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
+        ref = halfspace.setup_image(scene, sub=6, nodes=64)
+        lit = np.all(se > 0, axis=-1)
+        z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
+        per_seed = st.mean((1, 2))
+        ratio = per_seed.mean(0) / ref.mean((0, 1))
+        ratio_se = per_seed.std(0, ddof=1) / np.sqrt(len(st)) / ref.mean((0, 1))
+        print(f"  eta {eta}: {secs:.0f} s; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f}, max |z| "
+              f"{np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean / NumPy {fmt(ratio)} "
+              f"+- {fmt(ratio_se)}; median pixel rel SE {np.median(se[lit] / mean[lit]):.4f}")
+        for name, wrong in (("no light-side Fresnel", halfspace.setup_image(scene, sub=4, fresnel_light=False)),
+                            ("straight inverse square", halfspace.setup_image(scene, sub=4, geometry="straight")),
+                            ("no eta^2 in G", ref / eta ** 2)):
+            zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
+            print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
+                  f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
+
+
+def part_eta1(mi, args):
+    print("test 2: eta = 1.0001 (mneevolpath) against index-matched volpath (jade_veins, 32 x 32, K = 8 x 256)")
+    base = load_scene("jade_veins").with_resolution(32, 32)
+    smooth = dataclasses.replace(base, boundary=Boundary("dielectric", 1.0001, 0.0))
+    a, ta = stack(mi, ms.build_scene_dict(smooth), range(8), 256)
+    b, tb = stack(mi, ms.build_scene_dict(base), range(100, 108), 256)
+    se = np.sqrt(a.var(0, ddof=1) / len(a) + b.var(0, ddof=1) / len(b))
+    lit = np.all(se > 0, axis=-1)
+    z = ((a.mean(0) - b.mean(0)) / np.where(se > 0, se, 1))[lit]
+    pa, pb = a.mean((1, 2)), b.mean((1, 2))
+    se_m = np.sqrt(pa.var(0, ddof=1) / len(pa) + pb.var(0, ddof=1) / len(pb))
+    print(f"  {ta:.0f} s / {tb:.0f} s; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f}, max |z| "
+          f"{np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean ratio {fmt(pa.mean(0) / pb.mean(0))}, "
+          f"difference / SE {fmt((pa.mean(0) - pb.mean(0)) / se_m, 2)}")
+
+
+def part_area_limit(mi, args):
+    setup = dict(halfspace.SETUP, sigma_t=(1.6, 1.6, 1.6), albedo=(0.8, 0.8, 0.8))
+    scene = halfspace.validation_scene(1.33, size=8, setup=setup)
+    point, tp = stack(mi, ms.build_scene_dict(scene, max_depth=4), range(8), 1024)
+    pm = point.mean((1, 2))[:, 0]
+    print(f"test 3: sphere light of radius r / point light (grey half-space, single scattering, 8 x 8); "
+          f"point light K = 8 x 1024 spp in {tp:.0f} s, rel SE {pm.std(ddof=1) / np.sqrt(8) / pm.mean():.4f}")
+    intensity = np.asarray(setup["intensity"])
+    for r in (0.4, 0.25, 0.15, 0.1):
+        bulb = {"type": "sphere", "center": list(setup["light"]), "radius": r,
+                "emitter": {"type": "area", "radiance": {"type": "rgb",
+                                                         "value": (intensity / (np.pi * r * r)).tolist()}}}
+        d = ms.build_scene_dict(scene, lights=False, extra_emitters={"bulb": bulb}, sample_emitters=False,
+                                integrator={"type": "volpath", "max_depth": 4})
+        area, ta = stack(mi, d, range(100, 108), args.area_spp)
+        am = area.mean((1, 2))[:, 0]
+        ratio = am.mean() / pm.mean()
+        se = ratio * np.hypot(am.std(ddof=1) / np.sqrt(8) / am.mean(), pm.std(ddof=1) / np.sqrt(8) / pm.mean())
+        print(f"  r = {r:<5} ratio {ratio:.4f} +- {se:.4f}   (volpath K = 8 x {args.area_spp} spp, {ta:.0f} s)")
+
+
+def part_rough(mi, args):
+    from harness.metrics.pixel import energy_ratio, relmse
+
+    name = "skin_torus_dielectric"
+    base = load_scene(name).with_resolution(32, 32)
+    cov = ms.coverage_mask(base) >= 0.999
+    ex, te = stack(mi, ms.build_scene_dict(base), range(8), args.rough_spp // 4)
+    exact = ex.mean(0)
+    print(f"report: rough dielectric alpha -> 0 against the exact image ({name}, 32 x 32; exact K = 8 x "
+          f"{args.rough_spp // 4} spp in {te:.0f} s, median rel SE "
+          f"{np.median((ex.std(0, ddof=1) / np.sqrt(8))[cov] / exact[cov]):.4f})")
+    for alpha in (0.2, 0.1, 0.05):
+        rough = dataclasses.replace(base, boundary=Boundary("dielectric", base.boundary.eta, alpha))
+        full, tf = stack(mi, ms.build_scene_dict(rough), range(8), args.rough_spp)
+        absorber, ta = stack(mi, ms.build_scene_dict(rough, albedo_override=0.0), range(200, 208), args.rough_spp)
+        sub = full - absorber                      # the subsurface part, separated as the harness does
+        m = sub.mean(0)
+        rel_se = np.median((sub.std(0, ddof=1) / np.sqrt(8))[cov] / np.maximum(m[cov], 1e-12))
+        energy = energy_ratio(m, exact, cov)
+        err = relmse(m, exact, cov)
+        print(f"  alpha {alpha:<5} subsurface energy / exact {fmt(energy.per_channel)}, relMSE {err.value:.4f} "
+              f"(harness metric, eps {err.params['eps']}), rough median rel SE {rel_se:.3f} "
+              f"(K = 8 x {args.rough_spp} spp, {tf + ta:.0f} s)")
+
+
+def failure_scenes():
+    out = [(n, load_scene(n).with_resolution(64, 64)) for n in SMOOTH_SCENES]
+    return out + [("halfspace eta 1.33", halfspace.validation_scene(1.33, size=64))]
+
+
+def part_failures(mi, args):
+    print("manifold walks (64 x 64, 64 spp, stats with 4 probe seeds; shares of walks started)")
+    print(f"  {'scene':<26} {'converged':>9} {'connected':>9} {'rescued':>8}   missed light / image (RGB)")
+    for name, scene in failure_scenes():
+        d = ms.build_scene_dict(scene, max_depth=4 if name.startswith("halfspace") else -1)
+        d["integrator"].update(stats=True, probe_seeds=4)
+        img, _ = stack(mi, d, [0], 64)
+        img = img[0]
+        tot = img.sum((0, 1))
+        started, conv, conn, rescued = tot[3:7]
+        missed = tot[7:10] / tot[:3]
+        print(f"  {name:<26} {conv / started:>9.4f} {conn / started:>9.4f} {rescued / started:>8.5f}   {fmt(missed, 5)}")
+
+
+def part_time(mi, args):
+    from harness.reference.render import render_reference
+
+    print("time to each scene's noise target at 128 x 128 (render_reference: pilot and top-ups), one run")
+    for name in SMOOTH_SCENES:
+        smooth = load_scene(name).with_resolution(128, 128)
+        target = float(smooth.tolerances["reference_rel_se"])
+        matched = dataclasses.replace(smooth, boundary=Boundary("index-matched"))
+        rows = {}
+        for label, sc in (("index-matched", matched), ("smooth", smooth)):
+            with tempfile.TemporaryDirectory() as tmp:
+                meta = render_reference(sc, f"{tmp}/ref", target_rel_se=target, variant=args.variant,
+                                        max_spp_per_seed=65536)
+            rows[label] = meta
+            print(f"  {name:<26} {label:<14} {meta['render_seconds']:>8.1f} s  spp {meta['spp_total']:>6}  "
+                  f"rel SE {meta['median_rel_se_subsurface']:.4f} (target {target}, met {meta['target_met']})")
+        ratio = rows["smooth"]["render_seconds"] / rows["index-matched"]["render_seconds"]
+        print(f"  {name:<26} ratio smooth / index-matched {ratio:.2f}")
+
+
+def part_eta2(mi, args):
+    from harness.regression.accuracy import load_case_reference
+    from harness.runs.worker import measure
+    from sslpv_gl.params import SSLPVParams
+    from sslpv_gl.renderer import SSLPVRenderer
+
+    renderer = SSLPVRenderer()
+    print("SSLPV eta2 against the exact committed 64 x 64 references (subsurface image)")
+    print(f"  {'scene':<26} {'config':<24} {'eta2':>5} {'energy ratio':>13} {'relMSE':>9}")
+    try:
+        for name in SMOOTH_SCENES:
+            scene = load_scene(name).with_resolution(64, 64)
+            ref, floors = load_case_reference(scene)
+            for mapping in ("collision", "diffusion"):
+                for eta2 in (False, True):
+                    params = SSLPVParams(N=32, steps=32, mapping=mapping, eta2=eta2)
+                    res = renderer.render(scene, params)
+                    rows = {r["metric"]: r for r in measure({"subsurface": res.subsurface, "full": res.full}, ref,
+                                                            floors) if r["image"] == "subsurface"}
+                    print(f"  {name:<26} {'N32-K32-' + mapping:<24} {str(eta2):>5} "
+                          f"{rows['energy_ratio']['value']:>13.4f} {rows['relmse']['value']:>9.4f}")
+    finally:
+        renderer.ctx.release()
+
+
+PARTS = {"halfspace": part_halfspace, "eta1": part_eta1, "area-limit": part_area_limit, "rough": part_rough,
+         "failures": part_failures, "time": part_time, "eta2": part_eta2}
+DEFAULT_PARTS = ["halfspace", "eta1", "area-limit", "failures"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--part", nargs="+", choices=list(PARTS), default=DEFAULT_PARTS)
+    ap.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (cuda_ad_rgb on an NVIDIA GPU)")
+    ap.add_argument("--area-spp", type=int, default=16384, help="spp per seed of the sphere-light renders")
+    ap.add_argument("--rough-spp", type=int, default=1024, help="spp per seed of the rough renders")
+    args = ap.parse_args()
+    mi = ms.use_variant(args.variant)
+    for part in args.part:
+        t = time.perf_counter()
+        PARTS[part](mi, args)
+        print(f"  ({part}: {time.perf_counter() - t:.0f} s)\n")
+
+
+if __name__ == "__main__":
+    main()
