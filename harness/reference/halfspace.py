@@ -39,7 +39,7 @@ import numpy as np
 
 from harness.reference.mitsuba_scene import camera_rays
 from harness.scene import Boundary, Camera, Medium, PointLight, Scene, scene_hash
-from harness.scene.geometry import build_mesh
+from harness.scene.geometry import BoxMesh, build_mesh
 
 #: The validation setup: a camera looking down at the interface y = 0 at about 40 degrees, a
 #: point light to the back left, a chromatic medium (sigma_t per colour, HG g = 0.3). The
@@ -59,8 +59,7 @@ def validation_scene(eta, size=24, setup=SETUP):
     tracking); the box is flat-shaded, its top face the interface.
     """
     w, depth = setup["half_width"], setup["depth"]
-    mesh = build_mesh({"kind": "box", "size": [2 * w, depth, 2 * w], "center": [0.0, -depth / 2, 0.0]},
-                      "halfspace", None)
+    mesh = build_mesh(BoxMesh(kind="box", size=[2 * w, depth, 2 * w], center=[0.0, -depth / 2, 0.0]), None)
     cam = Camera(origin=setup["origin"], target=setup["target"], up=(0.0, 1.0, 0.0), fov_y_deg=setup["fov_y"],
                  width=int(size), height=int(size))
 
