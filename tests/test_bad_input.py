@@ -98,6 +98,8 @@ def cube_ply(path, nan=False):
 
 
 FILE_MESH = 'kind = "file"\npath = "m.ply"'
+INDEX_MATCHED = 'kind = "index-matched"'
+SMOOTH = 'kind = "dielectric"\neta = {eta}\nroughness = 0.0'
 SPHERE_MESH = 'kind = "sphere"\nradius = 1.0\nsubdivisions = 4'
 
 
@@ -177,6 +179,23 @@ SCENE_CASES = [
      "lights[0].position", "inside the mesh"),
     ("torus-radii", GOOD.replace(SPHERE_MESH, 'kind = "torus"\nmajor_radius = 0.3\nminor_radius = 0.5'),
      "mesh.minor_radius", "smaller than major_radius"),
+    # a dielectric boundary (issue 10): eta a supported index, a smooth boundary with eta = 1 is index-matched
+    ("eta-zero", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=0)), "boundary.eta",
+     "eta = 0 is not a refractive index (must be > 0); give the medium's index"),
+    ("eta-negative", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=-1.4)), "boundary.eta", "not a refractive index"),
+    ("eta-below-one-smooth", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=0.8)), "boundary.eta",
+     "outside the supported range (1, 3]; use kind = \"index-matched\" for eta = 1; media less dense"),
+    ("eta-above-three", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=3.5)), "boundary.eta",
+     "outside the supported range (1, 3]"),
+    ("smooth-eta-one", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.0)), "boundary.eta",
+     "eta = 1 with roughness = 0 is an index-matched boundary; use kind = \"index-matched\""),
+    ("rough-eta-one", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.0).replace("0.0", "0.2")), "boundary.eta",
+     "eta = 1 is outside the supported range"),
+    ("roughness-negative", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4).replace("0.0", "-0.1")),
+     "boundary.roughness", "must be a number in [0, 1], got -0.1"),
+    ("roughness-above-one", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4).replace("0.0", "1.5")),
+     "boundary.roughness", "[0, 1]"),
+    ("eta-string", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta='"glass"')), "boundary.eta", "must be a number"),
 ]
 
 
@@ -207,6 +226,25 @@ def test_bad_mesh_file(cli, tmp_path, mesh, files, field, words):
                                                                                        "-1.5]")
     folder = scene_dir(tmp_path, text, files)
     cli(["render", folder, "--out", tmp_path / "o"], folder / "scene.toml", f": {field}", words)
+
+
+# Two closed tetrahedra sharing one edge: no boundary edge, but four faces meet at it.
+BOWTIE = ([[0, 0, 0], [.5, 0, 0], [0, .5, 0], [0, 0, .5], [0, -.5, 0], [0, 0, -.5]],
+          [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3), (0, 1, 4), (0, 5, 1), (0, 4, 5), (1, 5, 4)])
+SMOOTH_MESH_CASES = [
+    ("open-mesh-smooth", {"m.ply": lambda p: ply(p, [[-.5, -.5, 0], [.5, -.5, 0], [0, .5, 0]], [(0, 1, 2)])},
+     "is not closed (3 boundary edges"),
+    ("non-manifold-smooth", {"m.ply": lambda p: ply(p, *BOWTIE)},
+     "is not two-manifold (0 boundary edges, two-manifold=False); split or remove the non-manifold edges"),
+]
+
+
+@pytest.mark.parametrize("files,words", [c[1:] for c in SMOOTH_MESH_CASES], ids=[c[0] for c in SMOOTH_MESH_CASES])
+def test_bad_mesh_under_smooth_boundary(cli, tmp_path, files, words):
+    """A smooth boundary (rendered by manifold walks on the surface) needs a closed two-manifold mesh."""
+    text = GOOD.replace(SPHERE_MESH, FILE_MESH).replace(INDEX_MATCHED, SMOOTH.format(eta=1.4))
+    folder = scene_dir(tmp_path, text, files)
+    cli(["render", folder, "--out", tmp_path / "o"], folder / "scene.toml", ": mesh: ", words)
 
 
 def test_scene_not_utf8(cli, tmp_path):

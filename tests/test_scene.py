@@ -205,59 +205,16 @@ class TestBadMeshFields:
         expect_error(tmp_path, GOOD.replace(old, new, 1), pattern)
 
 
-def _ply(path, vertices, faces):
-    lines = ["ply", "format ascii 1.0", f"element vertex {len(vertices)}", "property float x", "property float y",
-             "property float z", f"element face {len(faces)}", "property list uchar int vertex_indices",
-             "end_header"] + [" ".join(map(str, p)) for p in vertices] + [f"3 {a} {b} {c}" for a, b, c in faces]
-    path.write_text("\n".join(lines) + "\n")
-
 
 def _dielectric(eta, roughness=None):
     extra = "" if roughness is None else f"\nroughness = {roughness}"
     return GOOD.replace('kind = "index-matched"', f'kind = "dielectric"\neta = {eta}{extra}')
 
 
-class TestBoundaryRules:
-    """``[boundary]`` (``model.dielectric_rules``): eta in (1, 3], roughness in [0, 1], a smooth
-    boundary with eta = 1 refused in favour of index-matched, closed two-manifold meshes."""
-
-    @pytest.mark.parametrize("eta,roughness,pattern", [
-        (0, 0.0, r"boundary\.eta: eta = 0 is not a refractive index \(must be > 0\); give the medium's index"),
-        (-1.4, 0.2, r"boundary\.eta: eta = -1\.4 is not a refractive index"),
-        (0.8, 0.0, r"boundary\.eta: eta = 0\.8 is outside the supported range \(1, 3\]; .*less dense"),
-        (3.5, 0.1, r"boundary\.eta: eta = 3\.5 is outside the supported range \(1, 3\]"),
-        (1.0, 0.0, r'boundary\.eta: eta = 1 with roughness = 0 is an index-matched boundary; use kind = '
-                   r'"index-matched"'),
-        (1.4, -0.1, r"boundary\.roughness: must be a number in \[0, 1\], got -0\.1; write e\.g\. roughness = 0\.0"),
-        (1.4, 1.5, r"boundary\.roughness: must be a number in \[0, 1\], got 1\.5"),
-        ('"glass"', 0.0, r"boundary\.eta: must be a number"),
-    ])
-    def test_one_line(self, tmp_path, eta, roughness, pattern):
-        expect_error(tmp_path, _dielectric(eta, roughness), pattern)
-
-    def test_rough_with_eta_one_is_out_of_range(self, tmp_path):
-        expect_error(tmp_path, _dielectric(1.0, 0.2), r"boundary\.eta: eta = 1 is outside the supported range")
+class TestBoundary:
+    """``[boundary]`` loads as written; its bad values are cases of ``tests/test_bad_input.py``."""
 
     def test_smooth_and_rough_load(self, tmp_path):
         smooth = load_scene(write_scene(tmp_path, _dielectric(1.4, 0.0)))
         assert smooth.boundary.kind == "dielectric" and smooth.boundary.roughness == 0.0 and smooth.boundary.eta == 1.4
         assert load_scene(write_scene(tmp_path, _dielectric(1.4))).boundary.roughness == 0.1   # the default
-
-    def test_open_mesh_under_smooth_boundary(self, tmp_path):
-        v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
-                     float) * 0.5
-        f = [(0, 2, 1), (0, 3, 2), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6),
-             (3, 0, 4), (3, 4, 7)]                       # a box without its top face
-        text = _dielectric(1.4, 0.0).replace('kind = "sphere"\nradius = 1.0\nsubdivisions = 4',
-                                             'kind = "file"\npath = "open.ply"')
-        expect_error(tmp_path, text, r"mesh: is not closed \(4 boundary edges.*; add repair = \"close-holes\"",
-                     files={"open.ply": lambda p: _ply(p, v, f)})
-
-    def test_non_manifold_mesh_under_smooth_boundary(self, tmp_path):
-        # Two closed tetrahedra sharing one edge: no boundary edge, but four faces meet at it.
-        v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, 0], [0, 0, -1]], float) * 0.5
-        f = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3), (0, 1, 4), (0, 5, 1), (0, 4, 5), (1, 5, 4)]
-        text = _dielectric(1.4, 0.0).replace('kind = "sphere"\nradius = 1.0\nsubdivisions = 4',
-                                             'kind = "file"\npath = "bowtie.ply"')
-        expect_error(tmp_path, text, r"mesh: is not two-manifold \(0 boundary edges, two-manifold=False\); split",
-                     files={"bowtie.ply": lambda p: _ply(p, v, f)})
