@@ -17,8 +17,10 @@ Parts (``--part``, default all but ``time``, ``rough`` and ``eta2``, which take 
                 and connect, share rescued by a probe, and the light the probes found that the
                 main walk missed (a lower bound of the energy lost), per channel.
 ``time``        the time to reach each smooth scene's noise target (``reference_rel_se``) at
-                128 x 128 with ``render_reference`` (pilot and top-ups, measured, not
-                extrapolated), against the index-matched version of the same scene, in one run.
+                128 x 128 against the index-matched version of the same scene, in one run:
+                rendered to the target with ``render_reference`` (pilot and top-ups), or with
+                ``--time-spp S`` predicted from one render of K = 8 x S spp each (time and
+                measured noise, SE ~ 1/sqrt(N)).
 ``eta2``        SSLPV with ``eta2`` off and on against the exact committed 64 x 64 references
                 of the smooth scenes: energy ratio and relMSE of the subsurface image.
 
@@ -158,9 +160,20 @@ def part_failures(mi, args):
 
 
 def part_time(mi, args):
+    """Time to the noise target, smooth over index-matched, in one run.
+
+    Without ``--time-spp`` each version is rendered to the target by ``render_reference``
+    (pilot and top-ups: measured, not extrapolated; hours at 128 x 128 on a 2-core machine).
+    With ``--time-spp S`` each is rendered once at K = 8 x S spp after a warm-up that compiles
+    its kernels, and the time to the target is predicted from the measured time and noise by
+    SE ~ 1/sqrt(N): ``T = t (r / target)^2`` (the same K, so the low bias of a median of SEs
+    cancels in the ratio; ``render_reference``'s own pilot predicts the same way).
+    """
     from harness.reference.render import render_reference
 
-    print("time to each scene's noise target at 128 x 128 (render_reference: pilot and top-ups), one run")
+    mode = "render_reference: pilot and top-ups" if args.time_spp is None else \
+        f"K = 8 x {args.time_spp} spp each after a warm-up, T = t (r / target)^2"
+    print(f"time to each scene's noise target at 128 x 128 ({mode}), one run, {args.variant}")
     for name in SMOOTH_SCENES:
         smooth = load_scene(name).with_resolution(128, 128)
         target = float(smooth.tolerances["reference_rel_se"])
@@ -168,13 +181,25 @@ def part_time(mi, args):
         rows = {}
         for label, sc in (("index-matched", matched), ("smooth", smooth)):
             with tempfile.TemporaryDirectory() as tmp:
-                meta = render_reference(sc, f"{tmp}/ref", target_rel_se=target, variant=args.variant,
-                                        max_spp_per_seed=65536)
-            rows[label] = meta
-            print(f"  {name:<26} {label:<14} {meta['render_seconds']:>8.1f} s  spp {meta['spp_total']:>6}  "
-                  f"rel SE {meta['median_rel_se_subsurface']:.4f} (target {target}, met {meta['target_met']})")
-        ratio = rows["smooth"]["render_seconds"] / rows["index-matched"]["render_seconds"]
-        print(f"  {name:<26} ratio smooth / index-matched {ratio:.2f}")
+                if args.time_spp is None:
+                    meta = render_reference(sc, f"{tmp}/ref", target_rel_se=target, variant=args.variant,
+                                            max_spp_per_seed=65536)
+                    seconds = meta["render_seconds"]
+                else:
+                    warm = render_reference(sc, f"{tmp}/warm", spp=1, K=2, variant=args.variant)
+                    meta = render_reference(sc, f"{tmp}/ref", spp=args.time_spp, K=8, variant=args.variant)
+                    r = meta["median_rel_se_subsurface"]
+                    seconds = meta["render_seconds"] * (r / target) ** 2
+                    print(f"  {name:<26} {label:<14} warm-up (K = 2 x 1 spp) {warm['render_seconds']:.1f} s; "
+                          f"{meta['render_seconds']:.1f} s for {meta['spp_total']} spp, rel SE {r:.4f} -> "
+                          f"{meta['spp_total'] * (r / target) ** 2:.0f} spp to {target}")
+            rows[label] = seconds
+            if args.time_spp is None:
+                print(f"  {name:<26} {label:<14} {seconds:>8.1f} s  spp {meta['spp_total']:>6}  "
+                      f"rel SE {meta['median_rel_se_subsurface']:.4f} (target {target}, met {meta['target_met']})")
+            else:
+                print(f"  {name:<26} {label:<14} time to target {seconds:>8.1f} s (predicted)")
+        print(f"  {name:<26} ratio smooth / index-matched {rows['smooth'] / rows['index-matched']:.2f}")
 
 
 def part_eta2(mi, args):
@@ -212,6 +237,9 @@ def main():
     ap.add_argument("--part", nargs="+", choices=list(PARTS), default=DEFAULT_PARTS)
     ap.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (cuda_ad_rgb on an NVIDIA GPU)")
     ap.add_argument("--area-spp", type=int, default=16384, help="spp per seed of the sphere-light renders")
+    ap.add_argument("--time-spp", type=int, default=None,
+                    help="time part: spp per seed of one render each, time to target predicted from its noise "
+                         "(default: render each to the target)")
     ap.add_argument("--rough-spp", type=int, default=1024, help="spp per seed of the rough renders")
     args = ap.parse_args()
     mi = ms.use_variant(args.variant)
