@@ -187,19 +187,26 @@ def part_time(mi, args):
                     seconds = meta["render_seconds"]
                 else:
                     warm = render_reference(sc, f"{tmp}/warm", spp=1, K=2, variant=args.variant)
+                    cpu = time.process_time()   # all threads of this process: robust to other jobs' load
                     meta = render_reference(sc, f"{tmp}/ref", spp=args.time_spp, K=8, variant=args.variant)
+                    cpu = time.process_time() - cpu
                     r = meta["median_rel_se_subsurface"]
-                    seconds = meta["render_seconds"] * (r / target) ** 2
+                    scale = (r / target) ** 2
+                    seconds = meta["render_seconds"] * scale
+                    rows[label + " cpu"] = cpu * scale
                     print(f"  {name:<26} {label:<14} warm-up (K = 2 x 1 spp) {warm['render_seconds']:.1f} s; "
-                          f"{meta['render_seconds']:.1f} s for {meta['spp_total']} spp, rel SE {r:.4f} -> "
-                          f"{meta['spp_total'] * (r / target) ** 2:.0f} spp to {target}")
+                          f"{meta['render_seconds']:.1f} s wall, {cpu:.1f} s CPU for {meta['spp_total']} spp, "
+                          f"rel SE {r:.4f} -> {meta['spp_total'] * scale:.0f} spp to {target}")
             rows[label] = seconds
             if args.time_spp is None:
                 print(f"  {name:<26} {label:<14} {seconds:>8.1f} s  spp {meta['spp_total']:>6}  "
                       f"rel SE {meta['median_rel_se_subsurface']:.4f} (target {target}, met {meta['target_met']})")
             else:
-                print(f"  {name:<26} {label:<14} time to target {seconds:>8.1f} s (predicted)")
-        print(f"  {name:<26} ratio smooth / index-matched {rows['smooth'] / rows['index-matched']:.2f}")
+                print(f"  {name:<26} {label:<14} time to target {seconds:>8.1f} s wall, "
+                      f"{rows[label + ' cpu']:.1f} s CPU (predicted)")
+        print(f"  {name:<26} ratio smooth / index-matched {rows['smooth'] / rows['index-matched']:.2f}"
+              + ("" if args.time_spp is None else
+                 f" (wall), {rows['smooth cpu'] / rows['index-matched cpu']:.2f} (CPU time)"))
 
 
 def part_eta2(mi, args):
