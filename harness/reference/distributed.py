@@ -129,6 +129,9 @@ class DaskDriver:
     def owns(self, fut):
         return fut in self._owner
 
+    def plan_of(self, fut):
+        return self._owner[fut][0]
+
     def handle(self, fut):
         """Merge a finished reference task; returns ``(plan, new futures, meta or None)``.
 

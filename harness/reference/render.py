@@ -390,9 +390,10 @@ class ReferencePlan:
         self.capped_by = None
         self.rounds, self.pilot = [], None
         self.cost = None                   # seconds per spp of one (pass, seed) unit, measured
-        self.job_seconds, self.jobs_run, self.reruns = 0.0, 0, 0
+        self.job_seconds, self.jobs_run, self.reruns, self.jobs_rolled_back = 0.0, 0, 0, 0
         self.workers = set()
         self.threads_seen = set()
+        self._t_final = None               # when the final render started (progress rate)
         self._gen = None
 
     # ----------------------------------------------------------------- executor interface
@@ -434,6 +435,7 @@ class ReferencePlan:
         self._round_spp.setdefault("spp", 0)
         self._round_spp["spp"] += result["spp"]
         self._round_spp["seconds"] = self._round_spp.get("seconds", 0.0) + result["seconds"]
+        self._round_spp["jobs"] = self._round_spp.get("jobs", 0) + 1
         if self._round_est is self.final:
             self._show()
 
@@ -454,6 +456,7 @@ class ReferencePlan:
         """Roll the running round back (time cap): every seed keeps its previous sample count."""
         self._round_est.restore(self._snapshot)
         self._outstanding = 0
+        self.jobs_rolled_back += self._round_spp.get("jobs", 0)
         self.aborted = True
         self.capped_by = "max_seconds"
         self.progress.log(f"time cap of {format_duration(self.max_seconds)} reached: the running step was "
@@ -523,6 +526,7 @@ class ReferencePlan:
         step_size = max(1, math.ceil(want / n_steps))
         topups, r = 0, float("nan")
         self.progress.update(done=0, total=K * want)
+        self._t_final = time.perf_counter()
         while True:
             step = min(step_size, want - final.spp)
             if self.deadline is not None:
@@ -577,13 +581,22 @@ class ReferencePlan:
         return line
 
     def _show(self, r=None):
-        """Progress toward the target: samples merged, last measured noise, noise-based ETA."""
+        """Progress toward the target: samples merged, the last measured noise, and the ETA.
+
+        The samples still to render come from the noise (the pilot's prediction, or a top-up's);
+        their time from the wall-clock rate of the final render so far (before its first job,
+        from the pilot's seconds per sample and the parallel slots)."""
         if self.progress is None:
             return
         done = self.final.samples_done()
         total = self.progress.total or done
-        left_spp = max(total / self.K - done / self.K, 0)
-        eta = self._round_wall(math.ceil(left_spp)) if self.cost is not None else None
+        left = max(total - done, 0)
+        if self._t_final is None:
+            self._t_final = time.perf_counter()
+        if done > 0:
+            eta = (time.perf_counter() - self._t_final) / done * left
+        else:
+            eta = self._round_wall(math.ceil(left / self.K)) if self.cost is not None else None
         if r is None:
             r = self.rounds[-1]["median_rel_se_subsurface"] if self.rounds else None
         detail = (f"median rel. SE {r:.2%} (target {self.target:.2%})" if r is not None and np.isfinite(r)
@@ -632,11 +645,12 @@ class ReferencePlan:
                            f"coverage >= {FULL_COVERAGE} and value > {LIT_FRACTION} x the channel's 99th percentile"),
             "lit_pixels": int(lit_mask(sm, self.coverage).any(axis=2).sum()),
             "covered_pixels": int((self.coverage >= FULL_COVERAGE).sum()),
-            "render_seconds": self.job_seconds,
+            "render_seconds": self.job_seconds,       # the jobs' own render time, summed (all workers)
             "wall_seconds": None,
             "executor": self.executor,
             "slots": self.slots,
             "jobs": self.jobs_run,
+            "jobs_rolled_back": self.jobs_rolled_back,
             "jobs_rerun_ignored": self.reruns,
             "workers": sorted(w for w in self.workers if w),
             "pilot": self.pilot,
@@ -666,10 +680,11 @@ class ReferencePlan:
         return meta
 
     def close_progress(self, message=None):
+        """End the progress display (its last state first), then print ``message`` as a last line."""
         if self.progress is not None:
+            self.progress.__exit__(None, None, None)
             if message:
                 self.progress.log(message)
-            self.progress.__exit__(None, None, None)
             self.progress = None
 
 

@@ -78,7 +78,7 @@ class SweepReferences:
 
     def handle(self, fut):
         """``(scene name, new futures, reference folder or None, error line or None)``."""
-        plan = self.driver._owner[fut][0]
+        plan = self.driver.plan_of(fut)
         name = plan.scene.name
         try:
             _, new, meta = self.driver.handle(fut)
