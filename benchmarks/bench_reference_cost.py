@@ -100,6 +100,7 @@ def do_check(specs):
 
     rows = []
     for spec in specs:
+        load = os.getloadavg()[0]
         name, _, size = spec.partition(":")
         scene = load_scene(name)
         target = scene.tolerances.get("small_reference_rel_se") or scene.tolerances.get("reference_rel_se") or 0.05
@@ -127,7 +128,8 @@ def do_check(specs):
                      spp_measured, est["predicted_seconds"], measured, how))
         print(f"{name:<20} {rows[-1][1]:>7} target {target:.2%}: predicted {est['predicted_spp_total']:>7} spp "
               f"{est['predicted_seconds']:>8.1f} s | measured {spp_measured:>7} spp {measured:>8.1f} s "
-              f"({how}) | time error {est['predicted_seconds'] / measured - 1:+.0%}", flush=True)
+              f"({how}, load average {load:.1f} before) | time error {est['predicted_seconds'] / measured - 1:+.0%}",
+              flush=True)
     return rows
 
 

@@ -19,7 +19,8 @@ were fitted to and the machine they were measured on are committed in
 ``cost_model.json`` beside this module.
 
 :func:`estimate_reference` predicts a scene's reference without rendering it: each
-colour pass contributes its ``t_px(tau_c, albedo_c)`` times the covered pixels; the
+colour pass contributes its ``t_px(tau_c, albedo_max_c)`` times the covered pixels (the
+largest albedo sets where Russian roulette starts, so how long paths get); the
 samples needed are ``v / target^2`` (median over the channels of ``v``), plus the
 pilot; the time divides by the cores at hand over the cores the model was measured
 on, and adds the measured fixed overhead. It knows nothing about the light's
@@ -80,7 +81,7 @@ def mean_chord(mesh):
 
 
 def medium_summary(scene):
-    """Per channel: mean σt and mean albedo over the voxels inside the mesh; the mean chord and optical size."""
+    """Per channel: mean σt, mean and largest albedo over the voxels inside the mesh; the mean chord, optical size."""
     from harness.scene.geometry import grid_inside
 
     m = scene.medium
@@ -88,9 +89,10 @@ def medium_summary(scene):
     if not inside.any():
         inside = np.ones(inside.shape, dtype=bool)
     st = np.asarray(m.sigma_t, np.float64)[inside].mean(axis=0)
-    al = np.asarray(m.albedo, np.float64)[inside].mean(axis=0)
+    al = np.asarray(m.albedo, np.float64)[inside]
     chord = mean_chord(scene.mesh)
-    return {"sigma_t": st.tolist(), "albedo": al.tolist(), "mean_chord": chord, "tau": (st * chord).tolist()}
+    return {"sigma_t": st.tolist(), "albedo": al.mean(axis=0).tolist(), "albedo_max": al.max(axis=0).tolist(),
+            "mean_chord": chord, "tau": (st * chord).tolist()}
 
 
 def estimate_reference(scene, target, workers=None, scheduler=None, model=None, coverage=None):
@@ -110,8 +112,11 @@ def estimate_reference(scene, target, workers=None, scheduler=None, model=None, 
     covered = int((np.asarray(coverage) >= FULL_COVERAGE).sum())
     summ = medium_summary(scene)
     tau, alb = np.asarray(summ["tau"]), np.asarray(summ["albedo"])
+    # Cost follows path length up to Russian roulette, which starts at a depth set by the LARGEST
+    # albedo (mitsuba_scene.rr_depth_for); noise follows the mean.
+    alb_max = np.asarray(summ["albedo_max"])
     split = ms.channel_passes(scene.medium) != (None,)
-    t_px = predict(model["time"]["coef"], tau, alb)            # per channel, as if each were its own pass
+    t_px = predict(model["time"]["coef"], tau, alb_max)        # per channel, as if each were its own pass
     t_spp = covered * (float(t_px.sum()) if split else float(t_px.max()))
     if not scene.boundary.index_matched:
         t_spp *= 2.0                                           # + the absorber pass (upper bound: same cost)

@@ -43,7 +43,7 @@ Both choices below were measured on ``marble_sphere`` (Jensen et al. 2001's marb
   past ``rr_depth`` is sampled with probability 0.95^n and weight 1/0.95^n. Unbiased in
   expectation, but in a medium where most of the light has travelled hundreds to thousands of
   bounces the energy sits in events too rare to be sampled: with Mitsuba's default
-  ``rr_depth = 5`` the marble came out 4-7 % dark (per channel), far outside its seed-to-seed
+  ``rr_depth = 5`` the marble came out 3.7-7.4 % dark (per channel), far outside its seed-to-seed
   standard error, which cannot see it. The harness therefore starts Russian roulette only where
   every path has lost most of its weight to absorption: ``rr_depth = ceil(ln(RR_WEIGHT) /
   ln(albedo_max))`` with ``RR_WEIGHT = 0.1`` (at least Mitsuba's 5; 230 for albedo 0.99, 2403 for

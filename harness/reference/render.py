@@ -215,10 +215,10 @@ def render_job(setup, job):
     spec = {p.name: p for p in setup.passes()}[job.pass_name]
     scene = _mitsuba_scene(mi, setup, spec)
     _fault_injection(job)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     img = np.asarray(mi.render(scene, seed=job.mitsuba_seed, spp=int(job.spp)), dtype=np.float64)
-    seconds = time.perf_counter() - t0
-    return {"sum": img * job.spp, "spp": int(job.spp), "seconds": seconds, "threads": threads,
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"sum": img * job.spp, "spp": int(job.spp), "seconds": seconds, "cpu_seconds": cpu, "threads": threads,
             "worker": f"{os.uname().nodename}:{os.getpid()}"}
 
 
@@ -391,6 +391,7 @@ class ReferencePlan:
         self.rounds, self.pilot = [], None
         self.cost = None                   # seconds per spp of one (pass, seed) unit, measured
         self.job_seconds, self.jobs_run, self.reruns, self.jobs_rolled_back = 0.0, 0, 0, 0
+        self.job_cpu_seconds = 0.0
         self.workers = set()
         self.threads_seen = set()
         self._t_final = None               # when the final render started (progress rate)
@@ -429,6 +430,7 @@ class ReferencePlan:
             return
         self._outstanding -= 1
         self.job_seconds += result["seconds"]
+        self.job_cpu_seconds += result.get("cpu_seconds", 0.0)
         self.jobs_run += 1
         self.workers.add(result.get("worker"))
         self.threads_seen.add(result.get("threads"))
@@ -646,6 +648,7 @@ class ReferencePlan:
             "lit_pixels": int(lit_mask(sm, self.coverage).any(axis=2).sum()),
             "covered_pixels": int((self.coverage >= FULL_COVERAGE).sum()),
             "render_seconds": self.job_seconds,       # the jobs' own render time, summed (all workers)
+            "render_cpu_seconds": self.job_cpu_seconds,   # the CPU time of their processes, summed
             "wall_seconds": None,
             "executor": self.executor,
             "slots": self.slots,
