@@ -126,18 +126,21 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     prints the cost model's prediction instead of rendering anything.
     """
     from harness.io.atomic import atomic_dir
+    from harness.io.outputs import check_replaceable, check_writable
     from harness.reference import render as _render
     from harness.reference.cache import read_reference_meta, reference_for
+    from harness.reference.committed import sized_scene
     from harness.reference.render import check_max_seconds
     from harness.runs.sweep import parse_size
     from harness.scene import load_scene
 
-    scene = load_scene(scene_name)
-    if size is not None:
-        scene = scene.with_resolution(*parse_size(size))
+    scene = sized_scene(load_scene(scene_name), parse_size(size))
     if target is not None and not (0 < float(target) < 1):
         raise InputError("--target", "target", f"must be a relative standard error in (0, 1), got {target}",
                          "use e.g. 0.05")
+    if out_dir is not None and not estimate:   # refused before minutes of rendering, not after them
+        check_replaceable(out_dir)
+        check_writable(out_dir, "--out")
     max_seconds = None
     if max_minutes is not None:
         max_seconds = 60.0 * check_max_seconds(max_minutes, "--max-minutes", "max-minutes")
