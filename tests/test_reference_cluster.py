@@ -75,7 +75,9 @@ def test_cluster_reference_is_bit_identical_to_serial_and_survives_a_dead_worker
     for key in ("spp_per_seed", "spp_total", "median_rel_se_subsurface", "jobs"):
         assert serial[key] == dist[key], key
     assert [r["spp_per_seed"] for r in serial["rounds"]] == [r["spp_per_seed"] for r in dist["rounds"]]
-    assert dist["executor"].startswith("a Dask cluster of 2") and len(dist["workers"]) == 2
+    # The processes that returned results: the two first workers, and the one the nanny started in
+    # place of the killed one when it got a job before the end (it depends on the timing).
+    assert dist["executor"].startswith("a Dask cluster of 2") and 2 <= len(dist["workers"]) <= 3, dist["workers"]
     assert serial["executor"] == "serial" and serial["threads"] == dist["threads"] == 1
 
 
