@@ -81,6 +81,30 @@ def test_cluster_reference_is_bit_identical_to_serial_and_survives_a_dead_worker
     assert serial["executor"] == "serial" and serial["threads"] == dist["threads"] == 1
 
 
+def test_step_plan_does_not_depend_on_measured_times(mi, tmp_path, monkeypatch):
+    """The default step plan (``steps=None``, as the ``reference`` command renders) comes from sample
+    counts only: a machine 10^4 times slower, or a cluster of 64 slots, renders the same chunks, so
+    the same seeds give the same image. (A plan sized from the predicted wall time split a step into
+    other chunks, other Mitsuba seeds: a cluster's reference differed from the serial one.)"""
+    from harness.reference import render
+    from harness.reference.render import render_reference
+
+    scene = _tiny()
+    kw = dict(target_rel_se=0.06, K=2, threads=1)
+    fast = render_reference(scene, tmp_path / "fast", **kw)
+    real_measure = render.ReferencePlan._measure_cost
+
+    def slow(self):
+        real_measure(self)
+        if self.cost is not None:
+            self.cost *= 1e4
+    monkeypatch.setattr(render.ReferencePlan, "_measure_cost", slow)
+    monkeypatch.setattr(render.SerialExecutor, "slots", 64)
+    slow_meta = render_reference(scene, tmp_path / "slow", **kw)
+    assert [r["spp_per_seed"] for r in fast["rounds"]] == [r["spp_per_seed"] for r in slow_meta["rounds"]]
+    _exrs_equal(tmp_path / "fast", tmp_path / "slow")
+
+
 class _FakeClient:
     def __init__(self, probes):
         self.probes = probes

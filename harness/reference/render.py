@@ -22,10 +22,12 @@ subsurface image over lit pixels at ``N_p`` samples per pixel, and the total is
 estimated from few seeds is corrected, :func:`se_median_factor`), split over
 ``K`` seeds and capped by ``max_spp_per_seed`` and by ``max_seconds``. The final
 render then runs in up to ``STEPS`` steps (every seed gets an equal share of its
-samples per step; one step per ``STEP_SECONDS`` of predicted time, so a render of a
-few seconds is one step); after each step the noise is measured, which is the
-progress the ``reference`` command shows, and the render stops as soon as the target
-is met.
+samples per step; one step per ``STEP_MIN_SPP`` samples per seed, so a small render
+is one step); after each step the noise is measured, which is the progress the
+``reference`` command shows, and the render stops as soon as the target is met.
+The steps follow from the sample counts alone, never from measured times or the
+executor's size: a step's samples are a seed's next chunks (Mitsuba seeds), so a
+timing-dependent step plan would make the serial and the cluster's image differ.
 Heavy tails (rough dielectric boundaries) make a short pilot optimistic, so when
 all planned samples are in and the target is still missed, every seed is topped up
 (new Mitsuba seeds) from a new prediction, at most three times. The figure written
@@ -82,7 +84,7 @@ DEFAULT_K = 8
 PILOT_K = 4
 PILOT_SPP = 16
 STEPS = 4                    # the final render is rendered (and its noise measured) in at most this many steps,
-STEP_SECONDS = 30.0          # ... one per this many seconds of its predicted wall time
+STEP_MIN_SPP = 32            # ... one per this many samples per seed (sample counts only: see the docstring)
 MAX_TOPUPS = 3
 MAX_SPP_PER_SEED = 4096
 MAX_LANES = 1 << 22          # samples in flight per mi.render call (memory bound)
@@ -523,8 +525,7 @@ class ReferencePlan:
                           "seconds": self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
                           "predicted_wall_seconds": self._round_wall(want)}
             self.progress.log(self._prediction_line(r_p, want, capped))
-        n_steps = self.steps or (1 if self.spp_fixed is not None else
-                                 min(STEPS, max(1, math.ceil(self._round_wall(want) / STEP_SECONDS))))
+        n_steps = self.steps or (1 if self.spp_fixed is not None else min(STEPS, max(1, want // STEP_MIN_SPP)))
         step_size = max(1, math.ceil(want / n_steps))
         topups, r = 0, float("nan")
         self.progress.update(done=0, total=K * want)
@@ -748,7 +749,7 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
     threads : Dr.Jit threads per render (None: Dr.Jit's default). The image depends on it.
     client : a ``dask.distributed.Client``: render the jobs on its workers; None renders here.
     progress : show progress on stderr (:class:`harness.progress.Progress`).
-    steps : steps of the final render (None: one per ``STEP_SECONDS`` predicted, at most ``STEPS``).
+    steps : steps of the final render (None: one per ``STEP_MIN_SPP`` samples per seed, at most ``STEPS``).
 
     Returns the dict written to ``reference.json``.
     """
