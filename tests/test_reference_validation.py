@@ -265,9 +265,10 @@ class TestWhiteFurnace:
         assert err.max() <= 1e-4, f"white furnace (exact): worst relative error {err.max():.2e} > 1e-4"
 
     def test_production_settings_unbiased(self, mi):
-        """The reference's own settings (NEE with MIS, rr_depth 5) are unbiased: the mean over the
-        covered pixels is L within max(1 %, 4 SE); K = 8 seeds x 32 spp. (Per-pixel noise is
-        heavy-tailed with NEE, so the per-pixel check is the exact test above.)"""
+        """The reference's own settings (NEE with MIS; rr_depth from the albedo rule, RR_DEPTH_CAP at
+        albedo 1) are unbiased: the mean over the covered pixels is L within max(1 %, 4 SE); K = 8
+        seeds x 32 spp. (Per-pixel noise is heavy-tailed with NEE, so the per-pixel check is the
+        exact test above.)"""
         scene = _furnace_scene()
         d = ms.build_scene_dict(scene, lights=False, extra_emitters=FURNACE_ENV)
         scn = mi.load_dict(d)
@@ -473,13 +474,13 @@ class TestRenderAndCache:
         assert render.RENDER_COUNT == n0 + 4
 
     def test_run_reference_cmd(self, mi, tmp_path, monkeypatch):
-        from harness.reference import run_reference_cmd
+        from harness.runs.references import run_reference_cmd
 
         monkeypatch.setenv("SSLPV_CACHE", str(tmp_path / "cache"))
-        out = run_reference_cmd("sphere_homogeneous", out_dir=tmp_path / "out", spp=2)
+        out = run_reference_cmd("sphere_homogeneous", out_dir=tmp_path / "out", spp=2, serial=True, progress=False)
         assert out["rendered"] and (tmp_path / "out" / "reference.json").is_file()
         assert out["reference_dir"].startswith(str(tmp_path / "cache"))
-        again = run_reference_cmd("sphere_homogeneous", spp=2)
+        again = run_reference_cmd("sphere_homogeneous", spp=2, serial=True, progress=False)
         assert not again["rendered"]
 
 

@@ -2,6 +2,8 @@
 
 from pathlib import Path
 
+from harness.cli.options import positive_int
+
 HELP = "manage the committed accuracy baselines"
 
 
@@ -11,6 +13,9 @@ def configure(sp):
     sp.add_argument("--store", type=Path, help="store holding the new values (update)")
     sp.add_argument("--into", type=Path, help="regenerate-references: write the checked new reference here "
                     "instead of replacing the committed one")
+    sp.add_argument("--scheduler", help="regenerate-references: an existing Dask scheduler (default: a LocalCluster)")
+    sp.add_argument("--workers", type=positive_int, help="regenerate-references: LocalCluster workers (default: cores)")
+    sp.add_argument("--serial", action="store_true", help="regenerate-references: render in this process")
 
 
 def run(args):

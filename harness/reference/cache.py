@@ -1,4 +1,4 @@
-"""A content-addressed cache of reference folders, and the ``reference`` command's glue.
+"""A content-addressed cache of reference folders.
 
 References live in ``<cache_dir>/<scene.name>/<content_hash[:16]>/``. A folder
 is served only when its ``reference.json`` parses, names the same full
@@ -8,21 +8,21 @@ atomically (``harness.io.atomic.atomic_dir``), so a half-written one never exist
 under the final name.
 
 A cached reference made for a looser noise target than the one asked for is
-not served (it would not meet the request); ``force=True`` always renders.
+not served (it would not meet the request), nor one rendered with other Mitsuba
+settings (integrator, colour passes: ``mitsuba_scene.scene_notes``) than the harness
+uses now; ``force=True`` always renders. The ``reference`` command's glue (cluster,
+estimate) is :mod:`harness.runs.references`.
 
 Default cache folder: ``$SSLPV_CACHE`` or ``<repo>/cache/references``.
 """
 
 import json
 import os
-import shutil
 from pathlib import Path
 
 from harness import paths
-from harness.io.atomic import atomic_dir
-from harness.io.outputs import check_replaceable, check_writable
-from harness.errors import InputError
 
+from . import mitsuba_scene as ms
 from . import render as _render
 
 REPO_ROOT = paths.REPO
@@ -51,8 +51,16 @@ def read_reference_meta(folder):
     return meta
 
 
+def current_settings(scene):
+    """The Mitsuba settings a reference of ``scene`` is rendered with now (compared with a cached one's)."""
+    notes = json.loads(json.dumps(ms.scene_notes(scene)))
+    return {k: notes[k] for k in ("integrator", "channel_passes")}
+
+
 def _serves(meta, scene, render_kwargs):
     if meta is None or meta.get("content_hash") != scene.content_hash:
+        return False
+    if {k: meta.get(k) for k in ("integrator", "channel_passes")} != current_settings(scene):
         return False
     target = render_kwargs.get("target_rel_se")
     if target is not None and render_kwargs.get("spp") is None:
@@ -73,41 +81,3 @@ def reference_for(scene, cache_dir=None, force=False, **render_kwargs):
         return folder
     _render.render_reference(scene, folder, **render_kwargs)
     return folder
-
-
-def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=None, force=False):
-    """``sslpv-harness reference SCENE [--out DIR] [--target T] [--spp N] [--variant V] [--force]``.
-
-    Renders (or takes from the cache) the reference of a suite scene, copies it
-    to ``out_dir`` when given, and returns what it wrote and measured.
-    """
-    from harness.scene import load_scene
-
-    scene = load_scene(scene_name)
-    if target is not None and not (0 < float(target) < 1):
-        raise InputError("--target", "target", f"must be a relative standard error in (0, 1), got {target}",
-                         "use e.g. 0.05")
-    if out_dir is not None:                    # refused before minutes of rendering, not after them
-        check_replaceable(out_dir)
-        check_writable(out_dir, "--out")
-    kwargs = {"spp": spp, "variant": variant}
-    # The scene states the noise its reference needs (dielectric scenes converge slowly).
-    target = target if target is not None else scene.tolerances.get("reference_rel_se")
-    if target is not None:
-        kwargs["target_rel_se"] = float(target)
-    before = _render.RENDER_COUNT
-    folder = reference_for(scene, force=force, **kwargs)
-    meta = read_reference_meta(folder)
-    result = {"scene": scene.name, "content_hash": scene.content_hash, "reference_dir": str(folder),
-              "rendered": _render.RENDER_COUNT != before, "out_dir": None, "files": meta["files"],
-              "median_rel_se_subsurface": meta.get("median_rel_se_subsurface"),
-              "median_rel_se_full": meta.get("median_rel_se_full"), "spp_total": meta.get("spp_total"),
-              "K": meta.get("K"), "render_seconds": meta.get("render_seconds")}
-    if out_dir is not None:
-        out = Path(out_dir)
-        if out.resolve() != folder.resolve():
-            with atomic_dir(out) as tmp:
-                for name in meta["files"]:
-                    shutil.copy2(folder / name, tmp / name)
-        result["out_dir"] = str(out)
-    return result

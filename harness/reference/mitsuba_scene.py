@@ -28,13 +28,44 @@ camera                 ``perspective``, ``fov_axis = "y"``, ``to_world = look_at
                        its footprint, so seeds give independent, unweighted estimates)
 sampler                ``independent`` (seeded per render)
 integrator             ``volpath``, ``max_depth = -1`` (unbounded: no truncation bias),
-                       ``rr_depth = 5`` (Mitsuba's default; Russian roulette is unbiased);
+                       ``rr_depth`` from the medium's largest albedo (:func:`rr_depth_for`, below);
                        a smooth dielectric boundary: ``mneevolpath``
                        (:mod:`harness.reference.mnee`, manifold next-event estimation through
                        the interface) with the same depths and :data:`MNEE_PARAMS`
+colour channels        one pass per channel (σt and albedo of that channel on all three) when
+                       σt differs between channels (:func:`channel_passes`, below)
 lights                 ``point``, RGB intensity in W/sr; background black (no environment)
 =====================  ======================================================================
+
+Long paths: Russian roulette and spectral tracking
+--------------------------------------------------
+Both choices below were measured on ``marble_sphere`` (Jensen et al. 2001's marble, albedo
+0.998-0.999, 263-360 mean free paths across) with ``benchmarks/bench_path_depth.py``.
+
+* Russian roulette. Past ``rr_depth`` Mitsuba's ``volpath`` continues a path with probability
+  ``q = min(max(throughput) * eta^2, 0.95)``: the 0.95 cap kills at least 5 % of the paths per
+  bounce whatever the albedo, and divides the survivors' weight by 0.95, so a path of n bounces
+  past ``rr_depth`` is sampled with probability 0.95^n and weight 1/0.95^n. Unbiased in
+  expectation, but in a medium where most of the light has travelled hundreds to thousands of
+  bounces the energy sits in events too rare to be sampled: with Mitsuba's default
+  ``rr_depth = 5`` the marble came out 3.7-7.4 % dark (per channel), far outside its seed-to-seed
+  standard error, which cannot see it. The harness therefore starts Russian roulette only where
+  every path has lost most of its weight to absorption: ``rr_depth = ceil(ln(RR_WEIGHT) /
+  ln(albedo_max))`` with ``RR_WEIGHT = 0.1`` (at least Mitsuba's 5; 230 for albedo 0.99, 2403 for
+  the marble's red channel; :data:`RR_DEPTH_CAP` when the albedo is 1). On the marble, energy
+  stopped changing (within 0.02 %) from a hard depth cap of 3000 up, and a cap of 1000 was 0.5 %
+  dark: nothing is truncated that the reference's noise could show. On the suite's
+  ``sphere_homogeneous`` (16 mean free paths across) the default and the rule agree within
+  0.2 % and cost the same per unit of noise.
+* Spectral tracking. With a σt that differs between channels, ``volpath`` samples distances with
+  one (hero) channel and weights the other channels by ratios of coefficients, a product over
+  every collision: for long paths it collapses to zero or explodes (on the marble the blue
+  channel's energy stopped growing after 100 bounces while the red one's error grew to 19 %).
+  Such a medium is rendered as three grey passes instead, each with one channel's σt and albedo,
+  from which only that channel is kept; each pass is then an exact single-channel problem.
 """
+
+import math
 
 import numpy as np
 
@@ -44,7 +75,9 @@ from harness.reference.llvm import ensure_libllvm
 DEFAULT_VARIANT = "llvm_ad_rgb"
 SUPPORTED_VARIANTS = ("llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
 MAX_DEPTH = -1
-RR_DEPTH = 5
+RR_DEPTH = 5              # Mitsuba's default, the least rr_depth the rule below gives
+RR_WEIGHT = 0.1           # Russian roulette starts once albedo_max ** depth <= this
+RR_DEPTH_CAP = 1 << 16    # rr_depth for a non-absorbing medium (albedo 1): paths end by leaving it
 GRID_FILTER = "nearest"
 
 DIELECTRIC_NOTE = (
@@ -190,13 +223,6 @@ def bsdf_dict(boundary):
             "int_ior": float(boundary.eta), "ext_ior": 1.0}
 
 
-def integrator_dict(boundary, max_depth=MAX_DEPTH, rr_depth=RR_DEPTH):
-    """``volpath``, or ``mneevolpath`` with :data:`MNEE_PARAMS` behind a smooth dielectric."""
-    if smooth_dielectric(boundary):
-        return {"type": "mneevolpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth), **MNEE_PARAMS}
-    return {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
-
-
 def absorber_is_black(scene):
     """Why the albedo-0 image is exactly zero for ``scene`` (no surface light reaches the camera), or None.
 
@@ -252,22 +278,78 @@ def light_dicts(lights):
             for i, lt in enumerate(lights)}
 
 
+def rr_depth_for(albedo_max, weight=RR_WEIGHT):
+    """Depth at which Russian roulette starts: the first ``n`` with ``albedo_max ** n <= weight``.
+
+    A path that has scattered ``n`` times carries at most ``albedo_max ** n`` of its weight, so
+    Mitsuba's capped roulette (survival <= 0.95 per bounce) only ever shortens paths that have
+    already lost all but ``weight`` of it (see the module docstring). At least :data:`RR_DEPTH`;
+    :data:`RR_DEPTH_CAP` for ``albedo_max >= 1``.
+    """
+    a = float(albedo_max)
+    if not a < 1.0:
+        return RR_DEPTH_CAP
+    if a <= 0.0:
+        return RR_DEPTH
+    return int(min(RR_DEPTH_CAP, max(RR_DEPTH, math.ceil(math.log(weight) / math.log(a)))))
+
+
+def channel_passes(medium):
+    """``(None,)`` for a medium whose σt is the same in every channel, else ``(0, 1, 2)``.
+
+    ``None`` is one RGB pass; ``c`` is a grey pass with channel ``c``'s σt and albedo on all
+    three channels, of which only channel ``c`` is kept (spectral tracking is unstable for
+    long paths; module docstring).
+    """
+    st = np.asarray(medium.sigma_t)
+    return (None,) if np.all(st == st[..., :1]) else (0, 1, 2)
+
+
+def grey_medium_scene(scene, channel):
+    """``scene`` with channel ``channel``'s σt and albedo copied to all three channels."""
+    m = scene.medium
+    return scene.with_medium(sigma_t=np.repeat(m.sigma_t[..., channel:channel + 1], 3, axis=3),
+                             albedo=np.repeat(m.albedo[..., channel:channel + 1], 3, axis=3))
+
+
+def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEPTH, rr_depth=None):
+    """The integrator of ``scene`` (a pass's albedo override and colour channel): ``volpath``, or
+    ``mneevolpath`` with :data:`MNEE_PARAMS` behind a smooth dielectric; ``rr_depth`` defaults to
+    :func:`rr_depth_for` the pass's largest albedo."""
+    if rr_depth is None:
+        if albedo_override is not None:
+            a = float(np.max(albedo_override))
+        else:
+            alb = np.asarray(scene.medium.albedo)
+            a = float(alb.max() if channel is None else alb[..., channel].max())
+        rr_depth = rr_depth_for(a)
+    d = {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
+    if smooth_dielectric(scene.boundary):
+        d = {**d, "type": "mneevolpath", **MNEE_PARAMS}
+    return d
+
+
 def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, lights=True,
-                     phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=RR_DEPTH,
-                     sample_emitters=None, integrator=None):
+                     phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=None,
+                     sample_emitters=None, channel=None, integrator=None):
     """Mitsuba ``load_dict`` dictionary for ``scene`` (the variant must be set: :func:`use_variant`).
 
     ``albedo_override`` replaces the albedo grid (0 gives the pure absorber whose
     image is subtracted to isolate subsurface light); ``extra_emitters`` maps
     names to emitter/shape dicts added as they are (validation scenes use area
     or environment emitters); ``lights=False`` drops the scene's point lights;
-    ``sample_emitters`` overrides the medium's next-event estimation (validation);
+    ``sample_emitters`` overrides the medium's next-event estimation (validation).
+    ``rr_depth`` defaults to :func:`rr_depth_for` the medium's (or the pass's) largest albedo;
+    ``channel`` (0, 1, 2) makes the grey pass of that channel (:func:`channel_passes`);
     ``integrator`` replaces the integrator dict of :func:`integrator_dict` (validation).
     The seed is not part of the scene: it is passed to ``mi.render``.
     """
+    integrator = integrator or integrator_dict(scene, albedo_override, channel, max_depth, rr_depth)
+    if channel is not None:
+        scene = grey_medium_scene(scene, channel)
     d = {
         "type": "scene",
-        "integrator": integrator or integrator_dict(scene.boundary, max_depth, rr_depth),
+        "integrator": integrator,
         "sensor": sensor_dict(scene.camera, spp),
         "object": mitsuba_mesh(scene.mesh, bsdf_dict(scene.boundary),
                                medium_dict(scene, albedo_override, phase, filter_type, sample_emitters)),
@@ -287,6 +369,7 @@ def scene_notes(scene):
     b = scene.boundary
     note = (INDEX_MATCHED_NOTE if b.index_matched else SMOOTH_DIELECTRIC_NOTE if smooth_dielectric(b)
             else DIELECTRIC_NOTE)
+    split = channel_passes(scene.medium)
     return {
         "boundary": b.kind,
         "boundary_eta": float(b.eta),
@@ -295,7 +378,14 @@ def scene_notes(scene):
         "phase_note": RGB_G_NOTE,
         "g_channel_spread": spread,
         "grid_filter": GRID_FILTER,
-        "integrator": integrator_dict(b),
+        "integrator": (integrator_dict(scene) if split == (None,) else
+                       {"RGB"[c]: integrator_dict(scene, channel=c) for c in split}),
+        "channel_passes": ("one RGB pass" if split == (None,) else
+                           "one grey pass per channel (sigma_t differs between channels; spectral tracking "
+                           "is unstable for long paths)"),
+        "rr_note": (f"Russian roulette from depth ceil(ln({RR_WEIGHT}) / ln(albedo_max)) (at least {RR_DEPTH}): "
+                    "Mitsuba's survival cap of 0.95 per bounce under-samples long paths in high-albedo media "
+                    "(harness/reference/mitsuba_scene.py)"),
         # What `[mesh] repair = "close-holes"` changed in the scene's mesh (None: the mesh as given).
         "mesh_repair": getattr(scene.mesh, "repair", None),
     }

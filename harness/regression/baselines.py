@@ -337,11 +337,13 @@ def reference_agreement(old, new, significance=SIGNIFICANCE, k_old=None, k_new=N
             "threshold_p": significance / max(n, 1), "untested_mismatches": exact_mismatch}
 
 
-def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
+def regenerate_reference(scene_name, seed_offset=None, target=None, into=None, client=None, threads=None,
+                         progress=False):
     """Render the small reference again with new seeds; keep it only if it agrees with the old one.
 
     ``into`` writes the new reference to another folder instead of replacing the
-    committed one (the accuracy meta-tests keep such re-seeded references).
+    committed one (the accuracy meta-tests keep such re-seeded references). ``client``
+    renders its jobs on a Dask cluster (``threads``: Dr.Jit threads per render there).
     """
     from harness.io.images import read_exr
     from harness.reference.render import render_reference
@@ -359,6 +361,10 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None):
     out = tmp_root / scene_name
     if out.exists():
         shutil.rmtree(out)
+    if client is not None:
+        kwargs.update(client=client, threads=threads)
+    if progress:
+        kwargs["progress"] = True
     render_reference(scene, out, seed_base=base_seed, **kwargs)
     result = {"scene": scene_name, "dest": str(dest), "base_seed": base_seed}
     if old_info is not None and old_info.get("content_hash") == scene.content_hash:
@@ -398,4 +404,16 @@ def run_baselines_cli(args):
     names = [args.scene] if args.scene else list_scenes()
     if args.into and len(names) != 1:
         raise InputError("--into", "into", "needs exactly one --scene", "add --scene NAME")
-    return {"references": [regenerate_reference(n, into=args.into) for n in names]}, None
+    from harness.runs.references import _client
+
+    # On a LocalCluster by default (--scheduler: an existing one; --serial: in this process).
+    client, cluster, threads = _client(args.scheduler, args.workers, args.serial)
+    try:
+        out = [regenerate_reference(n, into=args.into, client=client, threads=threads,
+                                    progress=not getattr(args, "json", False)) for n in names]
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    return {"references": out}, None

@@ -261,43 +261,50 @@ def load_reference(ref_dir, shape):
 
 
 def reference_dir(scene, target=None):
-    """The committed small reference when it matches the scene exactly, else the cache's (rendered if absent)."""
+    """The committed small reference when it matches the scene exactly, else the cache's; None when
+    neither is there (the sweep then renders it on its cluster, :class:`harness.runs.references.SweepReferences`).
+
+    A reference that missed its own noise target is refused in one line
+    (:func:`harness.runs.references.check_target`), never judged against.
+    """
+    from harness.reference.cache import _serves, cache_path, read_reference_meta
     from harness.reference.committed import find_committed_reference
-    from harness.reference.cache import reference_for
+    from harness.runs.references import check_target
 
     committed = find_committed_reference(scene)
     if committed is not None:
+        check_target(committed, scene.name)
         return committed
-    target = target or scene.tolerances.get("reference_rel_se")
-    kwargs = {"target_rel_se": float(target)} if target else {}
-    return Path(reference_for(scene, cache_dir=None, **kwargs))
-
-
-def _reference_source(scene, target):
-    """Where a scene's reference will come from, for the progress log."""
-    from harness.reference.cache import cache_path, read_reference_meta
-    from harness.reference.committed import find_committed_reference
-
-    if find_committed_reference(scene) is not None:
-        return "the committed small reference"
-    meta = read_reference_meta(cache_path(scene))
+    folder = cache_path(scene)
+    meta = read_reference_meta(folder)
     if meta is not None and meta.get("content_hash") == scene.content_hash:
-        return f"the cache ({cache_path(scene)})"
-    target = target or scene.tolerances.get("reference_rel_se") or 0.05
-    return f"not cached: rendering it with Mitsuba to {100 * float(target):g} % median relative SE (minutes)"
+        check_target(folder, scene.name)
+    target = target or scene.tolerances.get("reference_rel_se")
+    return folder if _serves(meta, scene, {"target_rel_se": float(target)} if target else {}) else None
 
 
 def fetch_references(scenes, target, progress=True):
-    """Each scene's reference folder (committed, cached, or rendered now), one progress line per scene."""
+    """``(refs, missing)``: each scene's committed or cached reference folder, and the scenes that have
+    none (the sweep renders those on its cluster); one progress line per scene says which."""
     from harness.progress import Progress
+    from harness.reference.committed import find_committed_reference
 
-    refs = {}
+    refs, missing = {}, []
     with Progress("references", len(scenes), unit="references", enabled=progress) as bar:
         for s in scenes:
-            bar.log(f"{s.name}: {_reference_source(s, target)}")
-            refs[s.name] = reference_dir(s, target)
+            ref = reference_dir(s, target)
+            if ref is None:
+                t = target or s.tolerances.get("reference_rel_se") or 0.05
+                missing.append(s)
+                bar.log(f"{s.name}: not cached: rendering it with Mitsuba to {100 * float(t):g} % median "
+                        "relative SE on the sweep's cluster, beside the configurations that have a reference")
+            else:
+                refs[s.name] = ref
+                where = ("the committed small reference" if find_committed_reference(s) is not None
+                         else f"the cache ({ref})")
+                bar.log(f"{s.name}: {where}")
             bar.advance(detail=s.name)
-    return refs
+    return refs, missing
 
 
 # --------------------------------------------------------------------------- cluster
@@ -435,8 +442,11 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     client, cluster = make_client(scheduler, workers, lp_threads) if scheduler else (None, None)
     try:
         with claim_sweep_folder(out):        # held until the sweep ends: a second sweep here is refused
-            refs = fetch_references(scenes, cfg.reference_target, progress)
-            arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width)) for s in scenes}
+            # References: committed or cached ones are read now; the missing ones are rendered on the
+            # sweep's cluster together with the configurations (issue 16: _dispatch, SweepReferences).
+            refs, missing = fetch_references(scenes, cfg.reference_target, progress)
+            arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width))
+                      for s in scenes if s.name in refs}
             cfg.store = str(store_path)
             with atomic_write(out / SWEEP_FILE) as tmp:
                 tmp.write_text(cfg.to_json())
@@ -453,13 +463,18 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                 groups = group_configs([t for t in todo if method_of(t[1]) == "sslpv"], group)
                 groups += [(s, p, [(None, key)]) for s, p, key in todo if method_of(p) != "sslpv"]
                 summary["groups"] = len(groups)
+                render_refs = [s for s in missing if any(t[0] is s for t in todo)]
+                summary["references_rendered"] = [s.name for s in render_refs]
                 if todo:
                     if client is None:
                         if progress:
                             Progress("sweep", None).log(f"starting a local Dask cluster of "
                                                         f"{workers or os.cpu_count() or 1} workers")
                         client, cluster = make_client(None, workers, lp_threads)
-                    _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress)
+                    _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress,
+                              render_refs=render_refs,
+                              ref_threads=None if scheduler else _local_ref_threads(client))
+                    summary["references"] = {k: str(v) for k, v in refs.items() if v is not None}
                 # A run with failed (or never rendered) configurations stays open: the same command
                 # retries them, and the command line exits non-zero.
                 status = "finished" if summary["failed"] == 0 and summary["not_run"] == 0 else "incomplete"
@@ -505,8 +520,21 @@ class _NoWorkers(Exception):
     pass
 
 
-def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress):
+def _local_ref_threads(client):
+    from harness.runs.references import local_threads
+
+    return local_threads(len(client.scheduler_info().get("workers", {})))
+
+
+def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress, render_refs=(),
+              ref_threads=None):
     """Submit every step group, then record each configuration as its group arrives (client-side only).
+
+    ``render_refs``: scenes whose reference is missing. Their reference jobs run on the same
+    cluster, side by side with the groups of the other scenes (:class:`SweepReferences`; a
+    reference job whose worker dies is re-run by Dask and merged once); a scene's groups are
+    submitted when its reference is written, and fail with the reason when it cannot be (a
+    job failed, or the reference missed its target).
 
     Dead workers: a LocalCluster's nannies start new ones, and Dask runs a task that was on
     a dead worker again (``retries``; one that kills its worker three times fails with
@@ -528,6 +556,8 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
 
     from harness.runs import rivals, worker as sweep_worker
 
+    from harness.runs.references import SweepReferences
+
     shared = {}
 
     def share(name):
@@ -539,7 +569,7 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
 
     for name in arrays:
         share(name)
-    pending, attempts = {}, [0] * len(groups)
+    pending, attempts, waiting = {}, [0] * len(groups), {}
     n_groups = len(groups)
 
     def submit(i):
@@ -559,17 +589,48 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
         pending[fut] = i
 
     for i in range(n_groups):
-        submit(i)
+        if groups[i][0].name in shared:
+            submit(i)
+        else:                                # its reference is rendered first, on this cluster
+            waiting.setdefault(groups[i][0].name, []).append(i)
+    # --- references the sweep lacks, rendered on its cluster (issue 16)
+    pending_refs = SweepReferences(client, list(render_refs), cfg.reference_target, ref_threads)
     crash_mid_group = os.environ.get("SSLPV_SWEEP_CRASH_MID_GROUP") == "1"
     total = sum(len(m) for _, _, m in groups)
     try:
         with Progress("sweep", total, unit="configurations", enabled=progress) as bar:
             no_workers_since = None
             idle_since = time.monotonic()
-            while pending:
+            ref_futs = set(pending_refs.start())
+            while pending or ref_futs:
                 # Polled rather than distributed.wait(), which raises as soon as one future is cancelled.
+                done_refs = [f for f in ref_futs if f.done()]
+                for fut in done_refs:
+                    ref_futs.discard(fut)
+                    name, new, ref, err = pending_refs.handle(fut)
+                    ref_futs.update(new)
+                    if ref is None and err is None:
+                        continue
+                    if ref is not None:
+                        refs[name] = ref
+                        sc = groups[waiting[name][0]][0]
+                        arrays[name] = load_reference(ref, (sc.camera.height, sc.camera.width))
+                        share(name)
+                        bar.log(f"{name}: reference written ({ref})")
+                    for i in waiting.pop(name, []):
+                        if err is None:
+                            submit(i)
+                            continue
+                        s, p, members = groups[i]
+                        refs.setdefault(name, None)
+                        for k, key in members:
+                            _record(store, run_id, s, p.replace(steps=k), key, {"status": "failed", "error": err},
+                                    out, refs, summary, 0.0)
+                            bar.advance(failed=1, detail=f"{s.name}: no reference")
                 done = [f for f in pending if f.done()]
                 if not done:
+                    if done_refs:
+                        continue
                     time.sleep(0.1)
                     if time.monotonic() - idle_since < 2.0:
                         continue
@@ -613,13 +674,16 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
                             _crash()
     except (_NoWorkers, TimeoutError) as exc:
         # No worker came back: stop here; what was recorded stays, the rest is left for a re-run.
-        summary["not_run"] = sum(len(groups[i][2]) for i in pending.values())
+        summary["not_run"] = (sum(len(groups[i][2]) for i in pending.values())
+                              + sum(len(groups[i][2]) for ii in waiting.values() for i in ii))
         summary["error"] = (f"the Dask cluster lost all its workers and none came back within "
                             f"{NO_WORKERS_TIMEOUT_S:g} s" + (f" ({exc})" if str(exc) else ""))
         client.cancel(list(pending))
     except KeyboardInterrupt:
         store.finish_run(run_id, "interrupted", gl_renderer=summary["gl_renderer"])
         raise
+    finally:
+        pending_refs.close()
 
 
 def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
@@ -646,7 +710,8 @@ def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
                         error=res.get("error"), metrics=res.get("metrics", []),
                         timings=res.get("timings", {}),
                         render_dir=str(render_dir) if render_dir else None,
-                        reference_dir=str(refs[s.name]), steps_used=res.get("steps_used"),
+                        reference_dir=str(refs[s.name]) if refs.get(s.name) else None,
+                        steps_used=res.get("steps_used"),
                         diagnostics=res.get("diagnostics"), calibration=res.get("calibration"),
                         shared=res.get("shared"), precompute=res.get("precompute"), work=res.get("work"))
 
