@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import annotated_types
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, WrapValidator
+from pydantic import BaseModel, ConfigDict, Field, Tag, ValidationError, WrapValidator
 
 from harness.errors import InputError
 
@@ -253,6 +253,11 @@ def _walk(model, loc):
             continue
         origin = typing.get_origin(ann)
         if origin in (typing.Union, types.UnionType):
+            tagged = [base for base, meta in map(_strip, typing.get_args(ann))
+                      if any(isinstance(m, Tag) and m.tag == item for m in meta)]
+            if tagged:                              # a callable discriminator's Tag: that member
+                ann = tagged[0]
+                continue
             members = [_strip(a)[0] for a in typing.get_args(ann)]
             match = [m for m in members if isinstance(m, type) and (getattr(m, "__name__", None) == item
                                                                       or _tag(m) == item)]

@@ -80,7 +80,7 @@ from typing import Annotated, Optional, Union
 
 import numpy as np
 from dask.distributed import WorkerPlugin
-from pydantic import Field
+from pydantic import Discriminator, Field, Tag
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from harness.io.atomic import atomic_write
@@ -119,6 +119,10 @@ DEFAULT_LP_THREADS = "default"
 
 
 _PRODUCT = any_product_model("field")
+# One product or a list of them, chosen by the value's shape, so that a bad value is reported
+# from the one branch that was meant (a plain union reports both, and loses the field's path).
+_PRODUCTS = Annotated[Union[Annotated[_PRODUCT, Tag("product")], Annotated[list[_PRODUCT], Tag("products")]],
+                      Discriminator(lambda v: "products" if isinstance(v, list) else "product")]
 
 
 @pydantic_dataclass(config=INPUT_CONFIG)
@@ -130,7 +134,7 @@ class SweepConfig:
     """
 
     scenes: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]  # names or folders
-    params: Union[_PRODUCT, list[_PRODUCT]]  # field -> list of values (or a list of such products; "method")
+    params: _PRODUCTS                        # field -> list of values (or a list of such products; "method")
     out: str                                 # output folder
     store: str = ""                          # results store (default OUT/store.sqlite)
     size: Optional[SweepSize] = None         # [W, H]; "small": each scene's committed size; None: the scene's own
