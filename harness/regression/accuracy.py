@@ -32,7 +32,7 @@ from harness.errors import InputError
 from harness.reference.committed import small_scene as _small
 from harness.regression.baselines import committed_image, committed_reference, find_entry, load_matrix, read_baseline
 from harness.regression.verdict import HEADLINE, image_change, judge_images, overall
-from harness.runs.params import config_label, parse_lists, expand
+from harness.runs.params import config_label, expand, file_label, parse_lists
 from harness.scene import load_scene
 
 REPO = paths.REPO
@@ -176,7 +176,7 @@ def _write_artifacts(root, scene, params, res, ref, rows):
     from harness.io.images import auto_exposure, write_exr, write_png
     from harness.store import Store
 
-    out = Path(root) / scene.name / config_label(params)
+    out = Path(root) / scene.name / file_label(config_label(params))
     out.mkdir(parents=True, exist_ok=True)
     exposure = auto_exposure(ref["subsurface"])
     # the layout of a render folder, so that `baselines update` takes the image from here

@@ -154,7 +154,9 @@ def committed_reference(scene):
 
 def image_name(scene_name, label, size):
     """Path of an entry's committed image, relative to :data:`BASELINE_DIR`."""
-    return f"{IMAGE_DIR_NAME}/{scene_name}/{label}-{int(size[0])}x{int(size[1])}.exr"
+    from harness.runs.params import file_label
+
+    return f"{IMAGE_DIR_NAME}/{scene_name}/{file_label(label)}-{int(size[0])}x{int(size[1])}.exr"
 
 
 def update_command(scene_name=None):

@@ -129,3 +129,9 @@ def expand(lists, base=None):
 def config_label(params):
     """A short stable name for a configuration: the paper's three axes, then any non-default setting."""
     return get_method("sslpv").label(params)
+
+
+def file_label(label):
+    """``label`` as one file or folder name: a calibrated mapping's path (``calibrated:dir/f.toml``)
+    has separators, so every character but letters, digits and ``._=+-`` becomes ``_``."""
+    return "".join(ch if ch.isascii() and (ch.isalnum() or ch in "._=+-") else "_" for ch in str(label))

@@ -1,0 +1,86 @@
+"""Print the per-scene tables of a calibration (``sslpv-harness calibrate --out DIR``) as Markdown.
+
+Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.run`) and prints, for one
+budget (default: the steady state, i.e. converged steps):
+
+* per scene, the subsurface energy ratio and relMSE of every mapping the page compares:
+  ``literal``, ``collision``, ``diffusion`` (no fitted factor), calibrated in-sample, calibrated
+  held out (leave-one-scene-out) and the per-scene oracle (the scene fitted on itself);
+* the targets of docs/calibration.md (energy ratio within [0.8, 1.25] on every scene with the
+  held-out fit; median held-out relMSE at most half the better of literal and collision) and,
+  per scene that misses the energy range, what the calibration says stops it;
+* the fitted values of every budget with their standard errors.
+
+It computes nothing: every figure is the calibration's own, so that the README quotes what
+``calibrate`` measured.
+
+Run: ``.venv/bin/python benchmarks/calibration_table.py DIR [--budget "N=32 steps=steady"]``
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _cell(row):
+    return f"{row['energy_ratio']:.3g} / {row['relmse']:.3g}" if row else ""
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("dir", type=Path, help="a calibrate --out folder")
+    ap.add_argument("--budget", default=None, help='e.g. "N=32 steps=steady" (default: the steady one, else the last)')
+    args = ap.parse_args(argv)
+    path = args.dir / "calibration.json"
+    if not path.is_file():
+        print(f"error: {path}: file: not found; give the --out folder of sslpv-harness calibrate", file=sys.stderr)
+        return 2
+    cal = json.loads(path.read_text())
+    results = cal["results"]
+    budget = args.budget or next((k for k in results if k.endswith("steps=steady")), list(results)[-1])
+    if budget not in results:
+        print(f"error: --budget: budget: {budget!r} is not in {path}; use one of: {', '.join(results)}",
+              file=sys.stderr)
+        return 2
+    r = results[budget]
+    print(f"calibration of the {cal['family']} family on {len(cal['scenes'])} scenes, budget {budget} "
+          f"({cal['command']}; {cal['renders']} renders, {cal['time']['wall_s']:.0f} s)")
+    print()
+    cols = [("literal", r["compared"].get("literal", {})), ("collision", r["compared"].get("collision", {})),
+            ("diffusion", r["compared"].get("diffusion", {})), ("calibrated, in-sample", r["in_sample"]),
+            ("calibrated, held out", r["held_out"]), ("oracle", r["oracle"])]
+    print("energy ratio / relMSE (subsurface):")
+    print()
+    print("| scene | " + " | ".join(name for name, _ in cols) + " |")
+    print("|---|" + "---|" * len(cols))
+    for scene in cal["scenes"]:
+        print(f"| {scene} | " + " | ".join(_cell(c.get(scene)) for _, c in cols) + " |")
+    t = r["targets"]
+    print()
+    print(f"targets: energy ratio in {t['energy_range']} on every scene (held out): "
+          f"{'met' if t['energy_met'] else 'NOT met'}"
+          + ("" if t["energy_met"] else " (outside: " + ", ".join(f"{k} {v:.3g}" for k, v in
+                                                                   t["energy_outside"].items()) + ")"))
+    print(f"median held-out relMSE {t['median_held_out_relmse']:.4g} against {t['relmse_factor']} x "
+          f"min(literal {t['median_relmse_literal']:.4g}, collision {t['median_relmse_collision']:.4g}): "
+          f"{'met' if t['relmse_met'] else 'NOT met'}")
+    lim = r.get("limits") or {}
+    for s in lim.get("scenes", []):
+        print(f"  {s['scene']}: held-out energy {s['held_out_energy']:.3g}, oracle {s['oracle_energy']:.3g}: {s['why']}")
+    if "median_oracle_relmse" in lim:
+        print(f"  median oracle relMSE {lim['median_oracle_relmse']:.4g} "
+              f"(the relMSE target {'would be met' if lim.get('oracle_relmse_met') else 'is missed'} even by the oracle)")
+    print()
+    print("| budget | sigma_scale | radiance_scale | median held-out relMSE | energy target | relMSE target |")
+    print("|---|---|---|---|---|---|")
+    for name, b in results.items():
+        tb = b["targets"]
+        print(f"| {name} | {b['sigma_scale']:.4g} ± {b['sigma_scale_se']:.2g} | {b['radiance_scale']:.4g} ± "
+              f"{b['radiance_scale_se']:.2g} | {tb['median_held_out_relmse']:.4g} | "
+              f"{'met' if tb['energy_met'] else 'not met'} | {'met' if tb['relmse_met'] else 'not met'} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
