@@ -158,3 +158,25 @@ def test_judge_night_notes_renderer_scene_and_missing_renders(tmp_path):
     assert any("'GL one', tonight with 'GL two'" in n for n in res["notes"])
     assert any("N4-K8-collision: the scene changed since the previous night (hash ffffffffffff" in n
                for n in res["notes"])
+
+
+def test_trend_series_mixes_step_modes_and_keeps_settings_apart(tmp_path):
+    """Step counts and modes ('steady') in one matrix, and one mapping at two skips: every configuration
+    is its own line, and the plots are drawn (sorting int with str steps failed once, after the night)."""
+    from harness.regression.nightly import trend_plots, trend_series
+
+    class Store:
+        def configs(self, run_id):
+            return [{"status": "ok", "scene": "thin_ring", "method": "sslpv",
+                     "params": {"N": 32, "steps": steps, "mapping": "diffusion", "skip": skip},
+                     "metrics": {"subsurface": {"relmse": {"value": 0.1 * run_id + skip}}}}
+                    for steps in (8, "steady") for skip in (2, 0)]
+
+    nights = [(1, "2026-11-20"), (2, "2026-11-21")]
+    lines = trend_series(Store(), nights)[("thin_ring", "relmse")]
+    assert sorted(lines, key=lambda k: (str(k[2]), k[3])) == [
+        ("diffusion", 32, 8, ""), ("diffusion", 32, 8, "skip=0"),
+        ("diffusion", 32, "steady", ""), ("diffusion", 32, "steady", "skip=0")]
+    assert lines[("diffusion", 32, 8, "skip=0")] == [("2026-11-20", 0.1), ("2026-11-21", 0.2)]
+    out = trend_plots(Store(), nights, tmp_path)
+    assert [o["file"] for o in out] == ["trend_thin_ring_relmse.png"] and (tmp_path / out[0]["file"]).is_file()

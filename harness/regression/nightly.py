@@ -239,17 +239,13 @@ def judge_night(store, run_id, prev_run_id, references, scenes, size, tolerance,
     return {"changes": changes, "images": rows, "notes": notes, "family": family}
 
 
-def trend_plots(store, night_run_ids, out_dir):
-    """Per scene and headline metric: the subsurface value over nights, one line per configuration.
+def trend_series(store, night_run_ids):
+    """``{(scene, metric): {line: [(night, badness)]}}``: one line per configuration over the nights.
 
-    One panel per mapping; colour is the grid resolution N, line style the step count;
-    the y axis is the metric's badness (distance from its ideal) on a log scale.
+    An SSLPV line is ``(mapping, N, steps, settings)``, where ``settings`` is the label's non-default
+    part (``skip=0``), so that two configurations of one mapping stay two lines; another method's
+    is ``("method M", 0, its label, "")``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from harness.regression.verdict import badness
 
     series = {}
@@ -263,27 +259,44 @@ def trend_plots(store, night_run_ids, out_dir):
                 m = c["metrics"].get("subsurface", {}).get(metric)
                 if m is not None:
                     key = (c["scene"], metric)
-                    # another method: its own panel, one line per configuration (N 0, its label as "steps")
-                    line = (p.get("mapping"), p.get("N"), p.get("steps")) if method == "sslpv" else \
-                        (f"method {method}", 0, method_label(method, p))
+                    line = (p.get("mapping"), p.get("N"), p.get("steps"), _settings_suffix(p)) \
+                        if method == "sslpv" else (f"method {method}", 0, method_label(method, p), "")
                     series.setdefault(key, {}).setdefault(line, []).append((night, badness(metric, m["value"])))
+    return series
+
+
+def trend_plots(store, night_run_ids, out_dir):
+    """Per scene and headline metric: the subsurface value over nights, one line per configuration
+    (:func:`trend_series`).
+
+    One panel per mapping; colour is the grid resolution N, line style the step count;
+    the y axis is the metric's badness (distance from its ideal) on a log scale.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = trend_series(store, night_run_ids)
     styles = ["-", "--", ":", "-."]
     out = []
     for (scene, metric), lines in sorted(series.items()):
         mappings = sorted({k[0] for k in lines})
         grids = sorted({k[1] for k in lines})
-        steps = sorted({k[2] for k in lines}, key=lambda k: (isinstance(k, str), str(k) if isinstance(k, str) else k))
+        steps = sorted({k[2] for k in lines}, key=_steps_key)
         fig, axes = plt.subplots(1, len(mappings), figsize=(4.2 * len(mappings) + 1.6, 3.4), squeeze=False,
                                  sharey=True)
         for ax, mapping in zip(axes[0], mappings):
-            for (mp, n, k), pts in sorted(lines.items()):
+            for (mp, n, k, extra), pts in sorted(lines.items(), key=lambda kv: (str(kv[0][0]), kv[0][1],
+                                                                              _steps_key(kv[0][2]), kv[0][3])):
                 if mp != mapping:
                     continue
                 colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
                 ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
-                        color=colour, ls=styles[steps.index(k) % len(styles)], label=f"N{n} K{k}" if n else str(k))
+                        color=colour, ls=styles[steps.index(k) % len(styles)], label=(f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k))
             ax.set_yscale("log")
-            ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={mapping}", fontsize=9)
+            ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
+                         fontsize=9)
             ax.tick_params(axis="x", labelrotation=30, labelsize=7)
         ideal = "|x - 1|" if metric == "energy_ratio" else "value"
         axes[0][0].set_ylabel(f"{metric} ({ideal})")
@@ -295,6 +308,23 @@ def trend_plots(store, night_run_ids, out_dir):
         plt.close(fig)
         out.append({"scene": scene, "metric": metric, "file": name})
     return out
+
+
+def _steps_key(k):
+    """Step counts first, in order, then the modes ('auto', 'steady'): a list may mix int and str."""
+    return (isinstance(k, str), str(k) if isinstance(k, str) else k)
+
+
+def _short_mapping(mapping):
+    """A panel title: a calibrated mapping by its file's last two path parts, not the whole path."""
+    m = str(mapping)
+    return "calibrated:" + "/".join(m.split(":", 1)[1].split("/")[-2:]) if m.startswith("calibrated:") else m
+
+
+def _settings_suffix(params):
+    """The non-default settings of an SSLPV configuration's label (``skip=0``), beyond N, K and mapping."""
+    label, head = config_label(params), f"N{params.get('N')}-K{params.get('steps')}-{params.get('mapping')}"
+    return label[len(head) + 1:] if label.startswith(head + "-") else ""
 
 
 def _render(template, **ctx):
