@@ -47,11 +47,15 @@ class SSLPVMethod(Method):
     def label(self, params):
         """``N32-K16-collision``: the paper's three axes, then any non-default setting (as before methods)."""
         p = params if isinstance(params, dict) else params.as_dict()
-        label = f"N{p['N']}-K{p['steps']}-{p['mapping']}"
+        extra = self.settings_label(p)
+        return f"N{p['N']}-K{p['steps']}-{p['mapping']}" + ("-" + extra if extra else "")
+
+    def settings_label(self, params):
+        """The label's non-default settings beyond N, K and mapping (``skip=0``), or ``""``."""
+        p = params if isinstance(params, dict) else params.as_dict()
         defaults = self.params_type().as_dict()
-        extra = [f"{self.field_to_cli(k)}={v}" for k, v in sorted(p.items())
-                 if k not in ("N", "steps", "mapping", "method") and v != defaults.get(k)]
-        return label + ("-" + "-".join(extra) if extra else "")
+        return "-".join(f"{self.field_to_cli(k)}={v}" for k, v in sorted(p.items())
+                        if k not in ("N", "steps", "mapping", "method") and v != defaults.get(k))
 
     def renderer(self):
         if self._renderer is None:

@@ -37,7 +37,7 @@ import numpy as np
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.io.outputs import check_nightly_folder
 from harness.errors import InputError
-from harness.methods import config_label as method_label
+from harness.methods import config_label as method_label, get_method
 from harness.runs.params import any_product_model, check_methods, check_products, config_label, \
     param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
@@ -92,8 +92,6 @@ def load_matrix(path):
 def _split_methods(products, path, where):
     """Another method's product split as that method does it (the dipole rivals: one per gather, with the
     parameters that belong to each); SSLPV's products as they are."""
-    from harness.methods import get_method
-
     out = []
     for lists in products:
         name = lists.get("method", "sslpv")
@@ -259,7 +257,7 @@ def trend_series(store, night_run_ids):
                 m = c["metrics"].get("subsurface", {}).get(metric)
                 if m is not None:
                     key = (c["scene"], metric)
-                    line = (p.get("mapping"), p.get("N"), p.get("steps"), _settings_suffix(p)) \
+                    line = (p.get("mapping"), p.get("N"), p.get("steps"), get_method("sslpv").settings_label(p)) \
                         if method == "sslpv" else (f"method {method}", 0, method_label(method, p), "")
                     series.setdefault(key, {}).setdefault(line, []).append((night, badness(metric, m["value"])))
     return series
@@ -277,18 +275,20 @@ def trend_plots(store, night_run_ids, out_dir):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from harness.report.plots import steps_key
+
     series = trend_series(store, night_run_ids)
     styles = ["-", "--", ":", "-."]
     out = []
     for (scene, metric), lines in sorted(series.items()):
         mappings = sorted({k[0] for k in lines})
         grids = sorted({k[1] for k in lines})
-        steps = sorted({k[2] for k in lines}, key=_steps_key)
+        steps = sorted({k[2] for k in lines}, key=steps_key)
         fig, axes = plt.subplots(1, len(mappings), figsize=(4.2 * len(mappings) + 1.6, 3.4), squeeze=False,
                                  sharey=True)
         for ax, mapping in zip(axes[0], mappings):
             for (mp, n, k, extra), pts in sorted(lines.items(), key=lambda kv: (str(kv[0][0]), kv[0][1],
-                                                                              _steps_key(kv[0][2]), kv[0][3])):
+                                                                              steps_key(kv[0][2]), kv[0][3])):
                 if mp != mapping:
                     continue
                 colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
@@ -310,21 +310,10 @@ def trend_plots(store, night_run_ids, out_dir):
     return out
 
 
-def _steps_key(k):
-    """Step counts first, in order, then the modes ('auto', 'steady'): a list may mix int and str."""
-    return (isinstance(k, str), str(k) if isinstance(k, str) else k)
-
-
 def _short_mapping(mapping):
     """A panel title: a calibrated mapping by its file's last two path parts, not the whole path."""
     m = str(mapping)
     return "calibrated:" + "/".join(m.split(":", 1)[1].split("/")[-2:]) if m.startswith("calibrated:") else m
-
-
-def _settings_suffix(params):
-    """The non-default settings of an SSLPV configuration's label (``skip=0``), beyond N, K and mapping."""
-    label, head = config_label(params), f"N{params.get('N')}-K{params.get('steps')}-{params.get('mapping')}"
-    return label[len(head) + 1:] if label.startswith(head + "-") else ""
 
 
 def _render(template, **ctx):

@@ -87,6 +87,12 @@ def _line_value(v):
     return v if n is None and isinstance(v, str) else n
 
 
+def steps_key(k):
+    """Sort key of step counts and modes together: counts first, in order, then the named modes
+    (``auto``, ``steady``); a list may mix int and str."""
+    return (isinstance(k, str), k if isinstance(k, str) else float(k))
+
+
 def _series(configs, x_param, line_param, image, metric):
     """``{line value: sorted [(x, y)]}``, numeric lines first, then named ones (``steps = steady``);
     configurations lacking either parameter are left out."""
@@ -96,7 +102,7 @@ def _series(configs, x_param, line_param, image, metric):
         if x is None or ln is None or y is None:
             continue
         lines[ln].append((x, y))
-    order = sorted(lines, key=lambda k: (isinstance(k, str), k if isinstance(k, str) else float(k)))
+    order = sorted(lines, key=steps_key)
     return {k: sorted(lines[k]) for k in order}
 
 
