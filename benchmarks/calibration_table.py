@@ -22,6 +22,8 @@ import json
 import sys
 from pathlib import Path
 
+from harness.calibration.page import COLUMNS, HEADS, scene_result
+
 
 def _cell(row):
     return f"{row['energy_ratio']:.3g} / {row['relmse']:.3g}" if row else ""
@@ -47,15 +49,12 @@ def main(argv=None):
     print(f"calibration of the {cal['family']} family on {len(cal['scenes'])} scenes, budget {budget} "
           f"({cal['command']}; {cal['renders']} renders, {cal['time']['wall_s']:.0f} s)")
     print()
-    cols = [("literal", r["compared"].get("literal", {})), ("collision", r["compared"].get("collision", {})),
-            ("diffusion", r["compared"].get("diffusion", {})), ("calibrated, in-sample", r["in_sample"]),
-            ("calibrated, held out", r["held_out"]), ("oracle", r["oracle"])]
     print("energy ratio / relMSE (subsurface):")
     print()
-    print("| scene | " + " | ".join(name for name, _ in cols) + " |")
-    print("|---|" + "---|" * len(cols))
+    print("| scene | " + " | ".join(HEADS[col] for col in COLUMNS) + " |")
+    print("|---|" + "---|" * len(COLUMNS))
     for scene in cal["scenes"]:
-        print(f"| {scene} | " + " | ".join(_cell(c.get(scene)) for _, c in cols) + " |")
+        print(f"| {scene} | " + " | ".join(_cell(scene_result(r, col, scene)) for col in COLUMNS) + " |")
     t = r["targets"]
     print()
     print(f"targets: energy ratio in {t['energy_range']} on every scene (held out): "

@@ -31,12 +31,19 @@ def _fmt(v, spec=".3g"):
     return format(v, spec)
 
 
+def scene_result(res, col, name):
+    """One budget's result (``calibration.json``'s ``results[budget]``) for column ``col`` of
+    :data:`COLUMNS` and scene ``name``: ``{"relmse", "energy_ratio", ...}`` (the uncalibrated mappings
+    are under ``compared``)."""
+    return res["compared"][col][name] if col in res["compared"] else res[col][name]
+
+
 def _rows(res, names, noise):
     rows = []
     for n in names:
         cells = {}
         for col in COLUMNS:
-            v = res["compared"][col][n] if col in res["compared"] else res[col][n]
+            v = scene_result(res, col, n)
             cells[col] = {"relmse": _fmt(v.get("relmse")), "energy": _fmt(v.get("energy_ratio"), ".3f"),
                           "failed": v.get("failed")}
         rows.append({"scene": n, "cells": cells, "floor": _fmt(noise[n].get("floor_halves")),
