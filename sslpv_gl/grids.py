@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_grid", "write_grid"]
+__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_c00", "read_grid", "write_grid"]
 
 LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster than 4^3 on llvmpipe
 #: precision -> (GLSL image format, moderngl dtype, NumPy dtype)
@@ -91,3 +91,18 @@ def read_grid(texs, precision):
     N = texs[0].width
     cols = [np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4) for t in texs]
     return np.stack(cols, axis=3).astype(np.float32)
+
+
+def read_c00(texs, precision):
+    """Three colour textures -> ``(N, N, N, 3)`` float32 ``[z, y, x, colour]``: the band-0 coefficient only.
+
+    What the renderer's diagnostics need (flux, Eq. 1's ``c00``). At N = 128 a whole grid
+    (:func:`read_grid`) is 100 MB and its stacked float32 copy cost more than the read
+    itself, once per step count of a step group; this slices each texture's first channel.
+    """
+    dtype = FORMATS[precision][2]
+    N = texs[0].width
+    out = np.empty((N, N, N, 3), dtype=np.float32)
+    for col, t in enumerate(texs):
+        out[..., col] = np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4)[..., 0]
+    return out

@@ -70,7 +70,7 @@ from . import inject as injection
 from . import propagate as propagation
 from . import rsm
 from . import shade as shading
-from .grids import LOCAL_SIZE, GridSet, read_grid, write_grid
+from .grids import LOCAL_SIZE, GridSet, read_c00, read_grid, write_grid
 from .material import lpv_material, resample_medium
 from .params import STEP_MODES, SSLPVParams
 from .shade import MAX_LIGHTS
@@ -391,7 +391,11 @@ class SSLPVRenderer:
         shared = {k: _gpu_ms(queries[k].elapsed, stage_wall[k], k, warnings) for k in ("rsm", "injection")}
 
         want_diag = diagnostics or mode is not None
-        c0 = read_grid(grid.prop_a, params.precision) if want_diag else None   # outside the stage timers
+        # Outside the stage timers. The steady solve needs the whole injected grid; the
+        # diagnostics and the convergence check only its band-0 coefficient (read_c00).
+        c0 = read_grid(grid.prop_a, params.precision) if mode == "steady" else None
+        inj = _flux(read_c00(grid.prop_a, params.precision)) if want_diag else None
+        outside_mask = ~np.asarray(material["inside"], dtype=bool) if want_diag else None
         prop_ms = 0.0                                     # GL time of the propagation so far
         prop_wall = 0
         outputs = []
@@ -409,8 +413,8 @@ class SSLPVRenderer:
             timings["host_material"] = host_ms
             diag = None
             if want_diag:
-                diag = _diagnostics(c0, None if final is None else read_grid(final, params.precision),
-                                    read_grid(grid.accum, params.precision), material["inside"], steps_used)
+                diag = _diagnostics(inj, None if final is None else read_c00(final, params.precision),
+                                    read_c00(grid.accum, params.precision), outside_mask, steps_used)
             outputs.append((bufs, timings, steps_used, diag))
 
         if mode == "steady":
@@ -431,7 +435,7 @@ class SSLPVRenderer:
             if targets and targets[0] <= params.skip:
                 propagation.clear(grid.accum, grid)        # a snapshot before the first accumulated step
             check_every = 8
-            injected = _flux(c0) if mode == "auto" else None
+            injected = inj if mode == "auto" else None
             seg = {"q": None, "t": 0}                      # the running propagation segment
 
             def begin():
@@ -453,7 +457,7 @@ class SSLPVRenderer:
                     if step % check_every and step != last:
                         return False
                     end()                                  # the convergence check is not propagation work
-                    done = step == last or _flux(read_grid(src, params.precision)).max() < \
+                    done = step == last or _flux(read_c00(src, params.precision)).max() < \
                         params.converge_tol * max(float(injected.max()), 1e-300)
                     if done:
                         shade_now(step, src)
@@ -521,17 +525,24 @@ def _with_global_scale(material, r):
     return out
 
 
-def _flux(c):
-    """Total flux per colour of an SH grid, ``sum sqrt(4 pi) |c00|`` (abs: a lattice grid may dip below 0)."""
-    return np.sqrt(4.0 * np.pi) * np.abs(np.asarray(c, dtype=np.float64)[..., 0]).reshape(-1, 3).sum(axis=0)
+def _flux(c00):
+    """Total flux per colour of an SH grid's band-0 coefficients ``(..., 3)``: ``sum sqrt(4 pi) |c00|``.
+
+    abs: a lattice grid may dip below 0.
+    """
+    return np.sqrt(4.0 * np.pi) * np.abs(np.asarray(c00)).reshape(-1, 3).sum(axis=0, dtype=np.float64)
 
 
-def _diagnostics(c0, final, accum, inside, steps_used):
-    """Where the light is: injected flux, what is still propagating, and the accumulated share outside the mesh."""
-    inj = _flux(c0)
-    acc = np.abs(np.asarray(accum, dtype=np.float64)[..., 0])          # (N, N, N, 3)
-    total = acc.sum(axis=(0, 1, 2))
-    outside = acc[~np.asarray(inside, dtype=bool)].sum(axis=0)
+def _diagnostics(inj, final, accum, outside_mask, steps_used):
+    """Where the light is: injected flux, what is still propagating, and the accumulated share outside the mesh.
+
+    ``inj`` is the injected flux per colour (:func:`_flux` of the injected grid, once per render);
+    ``final`` and ``accum`` are band-0 coefficients ``(N, N, N, 3)`` (:func:`read_c00`) of the last
+    propagation and the accumulation grid; ``outside_mask`` is True for the cells outside the mesh.
+    """
+    acc = np.abs(np.asarray(accum))                                     # (N, N, N, 3), sums in float64
+    total = acc.reshape(-1, 3).sum(axis=0, dtype=np.float64)
+    outside = acc[outside_mask].sum(axis=0, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         remaining = None if final is None else float(np.max(np.where(inj > 0, _flux(final) / inj, 0.0)))
         share = float(np.sum(outside) / np.sum(total)) if np.sum(total) > 0 else 0.0

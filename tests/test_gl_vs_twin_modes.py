@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from harness.scene import load_scene
-from sslpv_gl import boundary, twin
+from sslpv_gl import boundary, steady, twin
 from sslpv_gl.params import SSLPVParams
 
 pytestmark = pytest.mark.gl
@@ -83,9 +83,16 @@ class TestModesEndToEnd:
         accum = gl_renderer.read_accumulation(params)
         mat = gl_renderer.lpv_material(scene, params)
         c0 = _twin_c0(gl_renderer, scene, params)
-        _, ref = twin.propagate(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], _dx(scene, params.N),
-                                params.steps, params.skip, emit=mat["emit"])
+        ref_prop, ref = twin.propagate(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], _dx(scene, params.N),
+                                       params.steps, params.skip, emit=mat["emit"])
         _check_grid(accum, ref, f"{name} {kw}: accumulation")
+        # the diagnostics (read back as band-0 coefficients only) against the twin's whole grids
+        d = res.diagnostics
+        flux = np.sqrt(4 * np.pi) * np.abs(c0[..., 0].astype(np.float64)).sum(axis=(0, 1, 2))
+        assert d["injected_flux"] == pytest.approx(flux.tolist(), rel=1e-4)
+        acc0 = np.abs(ref[..., 0].astype(np.float64))
+        assert d["outside_share"] == pytest.approx(acc0[~mat["inside"]].sum() / acc0.sum(), abs=1e-4)
+        assert d["remaining_fraction"] == pytest.approx(steady.remaining_fraction(ref_prop, c0), rel=1e-4)
         # shading: the twin applies the per-cell scale times the global calibration scale
         m = res.mask
         view = np.asarray(scene.camera.origin) - res.position[m]
