@@ -287,4 +287,13 @@ MUTATIONS = (
              "np.add.at(va, f[:, k], area / 3.0)", "np.add.at(va, f[:, k], area / 2.0)",
              ("tests/test_dipole_gl.py::test_vertex_converges_to_dense",),
              "vertex gather: each vertex stands for half its triangles' area instead of a third"),
+    Mutation("diag_c00_reads_band1", "physics", "sslpv_gl/grids.py",
+             "reshape(N, N, N, 4)[..., 0]", "reshape(N, N, N, 4)[..., 1]",
+             ("tests/test_gl_vs_twin_modes.py::TestModesEndToEnd::test_accumulation_and_shading",),
+             "read_c00: the renderer's diagnostics read the first band-1 coefficient instead of c00"),
+    Mutation("diag_outside_share_inside", "physics", "sslpv_gl/renderer.py",
+             'outside_mask = ~np.asarray(material["inside"], dtype=bool)',
+             'outside_mask = np.asarray(material["inside"], dtype=bool)',
+             ("tests/test_gl_vs_twin_modes.py::TestModesEndToEnd::test_accumulation_and_shading",),
+             "diagnostics: the share of accumulated energy 'outside' summed over the cells inside the mesh"),
 )
