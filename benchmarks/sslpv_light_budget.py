@@ -25,8 +25,11 @@ and ``--mappings diffusion``, narrow them).
 import argparse
 import itertools
 import json
+import sys
 import time
 from pathlib import Path
+
+from harness.errors import InputError
 
 
 MAPPINGS = ("literal", "collision", "diffusion")
@@ -146,9 +149,26 @@ def _plot_refine(rows, grids, path):
     plt.close(fig)
 
 
+def _checked(args):
+    """``(scenes, grids, outsides, mappings)`` from the command line; an InputError names a bad value."""
+    from harness.runs.sweep import resolve_scenes
+    from harness.scene import list_scenes
+    from sslpv_gl.params import SSLPVParams
+
+    scenes = resolve_scenes(args.scenes) if args.scenes else list_scenes()
+    try:
+        grids = tuple(int(x) for x in args.grids.split(","))
+    except ValueError:
+        raise InputError("--grids", "grids", f"{args.grids!r} is not a comma-separated list of integers",
+                         "pass e.g. --grids 16,32,64") from None
+    outsides, mappings = tuple(args.outsides.split(",")), tuple(args.mappings.split(","))
+    for n, outside, m in itertools.product(grids, outsides, mappings):
+        SSLPVParams(N=n, steps="steady", mapping=m, outside=outside)     # raises the one-line InputError
+    return scenes, grids, outsides, mappings
+
+
 def main(argv=None):
     from harness.io.atomic import atomic_write
-    from harness.scene import list_scenes
     from sslpv_gl.renderer import SSLPVRenderer
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -159,7 +179,11 @@ def main(argv=None):
     ap.add_argument("--mappings", default=",".join(MAPPINGS), help="refine: mappings")
     ap.add_argument("--out", type=Path, default=Path("reports/light_budget"))
     args = ap.parse_args(argv)
-    scenes = args.scenes.split(",") if args.scenes else list_scenes()
+    try:                                   # every value checked before anything is rendered or written
+        scenes, grids, outsides, mappings = _checked(args)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     args.out.mkdir(parents=True, exist_ok=True)
     renderer = SSLPVRenderer()
     print(f"GL renderer: {renderer.gl_renderer}")
@@ -168,8 +192,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         print(f"\n== {part}")
         if part == "refine":
-            rows = part_refine(renderer, scenes, args.out, tuple(int(x) for x in args.grids.split(",")),
-                               tuple(args.outsides.split(",")), tuple(args.mappings.split(",")))
+            rows = part_refine(renderer, scenes, args.out, grids, outsides, mappings)
         else:
             rows = {"outside": part_outside, "gap": part_gap}[part](renderer, scenes, args.out)
         with atomic_write(args.out / f"{part}.json") as tmp:

@@ -326,6 +326,26 @@ def test_usage_errors_are_one_line_in_a_fresh_process(tmp_path):
         assert proc.stderr.startswith("error: --") and "must be an integer > 0" in proc.stderr
 
 
+
+LIGHT_BUDGET_CASES = [
+    ("mapping", ["--mappings", "diffusion,foo"], "--mapping: mapping: unknown mapping 'foo'"),
+    ("outside", ["--outsides", "nowhere"], "--outside: outside: unknown outside 'nowhere'"),
+    ("grids", ["--grids", "16,x"], "--grids: grids: '16,x' is not a comma-separated list of integers"),
+    ("scene", ["--scenes", "nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
+]
+
+
+@pytest.mark.parametrize("argv,needle", [c[1:] for c in LIGHT_BUDGET_CASES], ids=[c[0] for c in LIGHT_BUDGET_CASES])
+def test_light_budget_benchmark_bad_values(tmp_path, argv, needle):
+    """benchmarks/sslpv_light_budget.py checks every value before it renders or writes anything."""
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "sslpv_light_budget.py"), "--part", "refine",
+                           *argv, "--out", str(out)], cwd=tmp_path, capture_output=True, text=True,
+                          env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith("error: " + needle), proc.stderr
+    assert not out.exists()
+
 # --------------------------------------------------------------------------- outputs that are not ours
 
 def test_sweep_refuses_a_users_folder_and_keeps_its_sweep_json(cli, tmp_path):
