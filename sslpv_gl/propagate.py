@@ -17,7 +17,8 @@
    * - :func:`run`
      - Sec. 3.2, Sec. 4
      - ``propagate.comp``
-     - six-neighbour gather with ``sh.propagation_matrices()``, ping-pong,
+     - six-neighbour gather with ``sh.propagation_matrices()`` (their six
+       non-zero entries each, ``sh.AXIAL_PATTERN``), ping-pong,
        accumulation of steps ``k > skip``; a callback after each step lets
        the renderer shade snapshots or stop at convergence (``steps = auto``)
    * - :func:`scale_accumulation`
@@ -42,7 +43,7 @@ import numpy as np
 from . import shaders as _sh
 from .grids import FORMATS, LOCAL_SIZE
 from .rsm import gl_bytes
-from .sh import propagation_matrices, scatter_factors
+from .sh import check_axial, propagation_matrices, scatter_factors
 
 __all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "build_scale_program",
            "upload_material", "run", "scale_accumulation"]
@@ -56,8 +57,12 @@ def build_program(ctx, precision, acc, warnings):
     """``propagate.comp`` for a grid ``precision`` and accumulation mode ``acc``.
 
     The constant uniforms are set here: the sampler units (source grid 0-2,
-    material 3-5) and the six propagation matrices ``u_M``.
+    material 3-5) and the six propagation matrices ``u_M``, after checking that they
+    have the axial pattern whose six entries per matrix the shader multiplies by
+    (:func:`sslpv_gl.sh.check_axial`).
     """
+    matrices = propagation_matrices()
+    check_axial(matrices)
     fmt = FORMATS[precision][0]
     prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc})
     images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
@@ -67,7 +72,7 @@ def build_program(ctx, precision, acc, warnings):
         if name in present:
             prog[name].value = unit
     if "u_M" in present:
-        prog["u_M"].write(gl_bytes(propagation_matrices()))     # (6,4,4) -> 6 column-major mat4
+        prog["u_M"].write(gl_bytes(matrices))     # (6,4,4) -> 6 column-major mat4
     return prog
 
 

@@ -72,6 +72,9 @@ __all__ = [
     "clamped_cosine_coeffs",
     "face_sh_integrals",
     "propagation_matrices",
+    "AXIAL_PATTERN",
+    "axial_mask",
+    "check_axial",
     "neighbour_slices",
     "scatter_factors",
     "apply_scattering",
@@ -195,6 +198,40 @@ def propagation_matrices(n_quad=48):
     returned so callers may modify it.
     """
     return _propagation_matrices(int(n_quad)).copy()
+
+
+#: Per source offset (:data:`SOURCE_OFFSETS`): the index of the band-1 coefficient along the
+#: offset's axis, then the two transverse ones, in the order ``(c00, c1-1, c10, c11) ~ (1, y, z, x)``.
+AXIAL_PATTERN = ((3, 1, 2), (3, 1, 2), (1, 2, 3), (1, 2, 3), (2, 1, 3), (2, 1, 3))
+
+
+def axial_mask():
+    """(6, 4, 4) bool: the entries of each propagation matrix that symmetry allows to be non-zero.
+
+    A source on the destination's axis ``a`` sees the five receiving faces symmetrically about
+    that axis, so band 0 and the band-1 coefficient along ``a`` mix (a 2x2 block), and each
+    transverse band-1 coefficient maps to itself only (mirror symmetry across the axis makes
+    every other entry's integrand odd). ``propagate.comp`` multiplies by these six entries only.
+    """
+    mask = np.zeros((6, 4, 4), dtype=bool)
+    for s, (a, t1, t2) in enumerate(AXIAL_PATTERN):
+        mask[s][np.ix_((0, a), (0, a))] = True
+        mask[s, t1, t1] = mask[s, t2, t2] = True
+    return mask
+
+
+def check_axial(M, rtol=1e-12):
+    """Raise ValueError unless every entry of ``M`` outside :func:`axial_mask` is below ``rtol`` max|M|.
+
+    Guards ``propagate.comp``, which skips those entries: matrices with another structure
+    (another quadrature, another basis order) must not be used with it silently.
+    """
+    M = np.asarray(M, dtype=np.float64)
+    off = np.abs(np.where(axial_mask(), 0.0, M))
+    worst = tuple(int(i) for i in np.unravel_index(int(np.argmax(off)), off.shape))
+    if off[worst] > rtol * np.abs(M).max():
+        raise ValueError(f"propagation matrix {worst[0]} has entry {worst[1:]} = {M[worst]:.3g}, outside the axial "
+                         f"pattern that propagate.comp assumes (sslpv_gl.sh.AXIAL_PATTERN)")
 
 
 def neighbour_slices(offset):

@@ -5,6 +5,8 @@ import pytest
 
 from sslpv_gl import propagation_matrices as exported
 from sslpv_gl.sh import (
+    axial_mask,
+    check_axial,
     apply_scattering,
     clamped_cosine_coeffs,
     face_sh_integrals,
@@ -225,6 +227,28 @@ class TestMatricesAnalytic:
         corners = [np.array([-1.5, y, z]) for y, z in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))]
         a = np.arctan(0.5 / 1.5)
         assert polygon_solid_angle(corners) == pytest.approx(4 * np.arcsin(np.sin(a) ** 2), rel=1e-13)
+
+
+class TestAxialPattern:
+    """``propagate.comp`` multiplies by six entries of each matrix (``sh.AXIAL_PATTERN``); the rest are 0."""
+
+    def test_closed_form_has_the_pattern(self):
+        exact = analytic_matrices()          # an independent route: closed-form solid angles and irradiances
+        off = np.abs(np.where(axial_mask(), 0.0, exact)).max()
+        on = np.abs(exact[axial_mask()]).min()
+        print(f"closed-form matrices: largest entry outside the pattern {off:.1e}, smallest inside {on:.4f}")
+        assert off <= 1e-14 and on > 0.03
+
+    def test_quadrature_matrices_pass_the_check(self):
+        check_axial(propagation_matrices())
+
+    def test_check_refuses_another_structure(self):
+        M = propagation_matrices()
+        M[4, 2, 3] = 1e-6                    # a z source coupling c10 to c11: not axial
+        with pytest.raises(ValueError, match=r"propagation matrix 4 has entry \(2, 3\)"):
+            check_axial(M)
+        with pytest.raises(ValueError, match="outside the axial pattern"):
+            check_axial(M[[2, 1, 0, 3, 4, 5]])     # +y's matrix in the +x slot
 
 
 # ----------------------------------------------------------- Eq. 3 scattering

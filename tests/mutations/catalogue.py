@@ -85,9 +85,13 @@ MUTATIONS = (
 
     # ------------------------------------------------------------------ GLSL
     Mutation("glsl_propagate_band_swap", "glsl", "sslpv_gl/shaders/propagate.comp",
-             "out_r += u_M[s] * vec4(h.r * cr.x, hk.r * cr.yzw);", "out_r += u_M[s] * vec4(hk.r * cr.x, h.r * cr.yzw);",
+             "vec3 c0 = h * vec3(cr.x, cg.x, cb.x);", "vec3 c0 = hk * vec3(cr.x, cg.x, cb.x);",
              ("tests/test_scattering.py::TestEq3InGL::test_propagate_comp_applies_it",),
-             "propagate.comp: Eq. 3's factor on band 0 instead of band 1 (red)"),
+             "propagate.comp: Eq. 3's band-1 factor on band 0 too"),
+    Mutation("glsl_propagate_axis_z_as_x", "glsl", "sslpv_gl/shaders/propagate.comp",
+             "gather(d, ivec3(0, 0, -1), 5, 2, 1, 3,", "gather(d, ivec3(0, 0, -1), 5, 3, 1, 2,",
+             (f"{GL}::TestPropagate::test_random_heterogeneous[2-0-collision]",),
+             "propagate.comp: the -z source's axial block on the x coefficient (the sparse product's pattern)"),
     Mutation("glsl_destination_absorption_bgr", "glsl", "sslpv_gl/shaders/propagate.comp",
              "vec3 h_d = texelFetch(u_half, d, 0).rgb;", "vec3 h_d = texelFetch(u_half, d, 0).bgr;",
              (f"{GL}::TestPropagate::test_random_heterogeneous[2-0-collision]",),
