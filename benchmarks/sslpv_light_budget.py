@@ -12,14 +12,17 @@ Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot f
     the factor E(converged) / E(K) on the subsurface image's energy, per scene and mapping, beside
     the factors 3, 2 and 1.2 the paper's Fig. 8 applies by hand at 8, 16 and 32 steps.
 ``refine``
-    Subsurface relMSE and energy ratio against the committed 64x64 references, at N = 16, 32, 64
+    Subsurface relMSE and energy ratio against the committed small references (64x64; wide_slab
+    60x36), at N = 16, 32, 64 (``--grids``)
     at the converged accumulation (``steps = steady``), for every index-matched suite scene, every
     mapping and the outside modes ``vacuum``, ``extrapolated`` and ``absorb``. The noise floor is
     the same metric between the reference's two halves.
 
 Run: ``.venv/bin/python benchmarks/sslpv_light_budget.py --part outside --out reports/light_budget``
 (``--part all`` runs the three; ``--scenes a,b``, and for ``refine`` ``--grids 16,32``, ``--outsides vacuum``
-and ``--mappings diffusion``, narrow them).
+and ``--mappings diffusion``, narrow them). ``--merge A/refine.json B/refine.json --out DIR`` renders
+nothing: it joins the rows of several refine runs (each N from the last file that has it), prints them as
+one Markdown table and writes ``DIR/refine.json`` and ``DIR/refine.png``.
 """
 
 import argparse
@@ -123,6 +126,7 @@ def part_refine(renderer, scenes, out, grids=(16, 32, 64), outsides=("vacuum", "
 
 
 def _plot_refine(rows, grids, path):
+    """relMSE against N, one panel per scene, one line per (mapping, outside) over the grids it has."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -131,22 +135,112 @@ def _plot_refine(rows, grids, path):
     from harness.io.atomic import atomic_write
 
     scenes = sorted({r["scene"] for r in rows})
-    fig, axes = plt.subplots(1, max(len(scenes), 1), figsize=(3.2 * max(len(scenes), 1), 3.0), squeeze=False)
-    for ax, s in zip(axes[0], scenes):
+    # one colour per (mapping, outside) on every panel, so that the panels read alike
+    lines = list(dict.fromkeys((r["mapping"], r["outside"]) for r in rows))
+    colour = {ln: f"C{i % 10}" for i, ln in enumerate(lines)}
+    ncols = min(max(len(scenes), 1), 4)
+    nrows = -(-max(len(scenes), 1) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.2 * ncols, 2.8 * nrows), squeeze=False)
+    for ax in axes.flat[len(scenes):]:
+        ax.axis("off")
+    for ax, s in zip(axes.flat, scenes):
         for r in rows:
             if r["scene"] == s:
-                ax.loglog(grids, [r["relmse"][n] for n in grids], "o-", label=f"{r['mapping']}/{r['outside']}")
+                ns = sorted(int(n) for n in r["relmse"])
+                ax.loglog(ns, [_at(r["relmse"], n) for n in ns], "o-", color=colour[(r["mapping"], r["outside"])],
+                          label=f"{r['mapping']}/{r['outside']}")
                 floor = r["noise_floor_relmse"]
         ax.axhline(floor, color="grey", ls=":", label="noise floor")
         ax.set_title(s, fontsize=9)
-        ax.set_xlabel("N")
+        ax.set_xlabel("N", fontsize=8)
         ax.set_xticks(grids, [str(n) for n in grids])
-    axes[0][0].set_ylabel("subsurface relMSE (converged)")
-    axes[0][0].legend(fontsize=7)
+        ax.minorticks_off()
+    for row in axes:
+        row[0].set_ylabel("subsurface relMSE\n(converged)", fontsize=8)
+    handles = [plt.Line2D([], [], color=colour[ln], marker="o", label=f"{ln[0]}/{ln[1]}") for ln in lines]
+    handles.append(plt.Line2D([], [], color="grey", ls=":", label="noise floor"))
+    fig.legend(handles=handles, loc="lower right", fontsize=8, frameon=False)
     fig.tight_layout()
     with atomic_write(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
     plt.close(fig)
+
+
+def _at(per_n, n):
+    """``per_n[n]`` whether the keys are ints (a run) or strings (its refine.json)."""
+    return per_n[n] if n in per_n else per_n[str(n)]
+
+
+ROW_KEYS = ("scene", "mapping", "outside", "relmse", "energy_ratio", "noise_floor_relmse")
+
+
+def merge_refine(paths):
+    """The rows of several ``refine.json`` files as one: per (scene, mapping, outside), each N's figures
+    from the last file that has that N. Returns ``(rows, grids)``; a missing or malformed file is an
+    InputError naming it."""
+    merged = {}
+    for path in paths:
+        try:
+            rows = json.loads(Path(path).read_text())
+        except OSError as exc:
+            raise InputError(path, "file", f"cannot be read ({exc.strerror or exc})",
+                             "pass a refine.json written by --part refine") from None
+        except ValueError as exc:
+            raise InputError(path, "file", f"is not JSON ({exc})", "pass a refine.json written by --part refine") \
+                from None
+        if not isinstance(rows, list):
+            raise InputError(path, "rows", "must be a list of rows", "pass a refine.json written by --part refine")
+        for i, r in enumerate(rows):
+            missing = [k for k in ROW_KEYS if not isinstance(r, dict) or k not in r]
+            if missing:
+                raise InputError(path, f"row {i}", f"lacks {', '.join(missing)}",
+                                 "pass a refine.json written by --part refine")
+            try:
+                rel = {int(n): float(v) for n, v in r["relmse"].items()}
+                er = {int(n): float(v) for n, v in r["energy_ratio"].items()}
+            except (AttributeError, TypeError, ValueError):
+                raise InputError(path, f"row {i}", "relmse and energy_ratio must map N to a number",
+                                 "pass a refine.json written by --part refine") from None
+            m = merged.setdefault((r["scene"], r["mapping"], r["outside"]),
+                                  {"scene": r["scene"], "mapping": r["mapping"], "outside": r["outside"],
+                                   "relmse": {}, "energy_ratio": {}, "wall_s": {}})
+            m["relmse"].update(rel)
+            m["energy_ratio"].update(er)
+            m["noise_floor_relmse"] = float(r["noise_floor_relmse"])
+            m["wall_s"][str(path)] = r.get("wall_s")
+    order = {m: i for i, m in enumerate(MAPPINGS)}
+    rows = sorted(merged.values(), key=lambda r: (r["scene"], order.get(r["mapping"], len(order)), r["mapping"],
+                                                   r["outside"]))
+    for r in rows:
+        r["relmse"] = dict(sorted(r["relmse"].items()))
+        r["energy_ratio"] = dict(sorted(r["energy_ratio"].items()))
+    return rows, sorted({n for r in rows for n in r["relmse"]})
+
+
+def refine_table(rows):
+    """Markdown: one line per scene, one column per (mapping, outside): ``E/E at each N (relMSE at each N)``."""
+    cols = list(dict.fromkeys((r["mapping"], r["outside"]) for r in rows))
+    by = {(r["scene"], r["mapping"], r["outside"]): r for r in rows}
+    head = ["scene"] + [f"`{m}`, {o}: E/E, N = " + " / ".join(str(n) for n in _grids_of(rows, m, o)) + " (relMSE)"
+                        for m, o in cols]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s in sorted({r["scene"] for r in rows}):
+        cells = [s]
+        for m, o in cols:
+            r = by.get((s, m, o))
+            if r is None:
+                cells.append("--")
+                continue
+            ns = _grids_of(rows, m, o)
+            cells.append(" / ".join(f"{r['energy_ratio'][n]:.2f}" if n in r["energy_ratio"] else "--" for n in ns)
+                         + " (" + " / ".join(f"{r['relmse'][n]:.2g}" if n in r["relmse"] else "--" for n in ns)
+                         + ")")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _grids_of(rows, m, o):
+    return sorted({n for r in rows if (r["mapping"], r["outside"]) == (m, o) for n in r["relmse"]})
 
 
 def _checked(args):
@@ -178,7 +272,23 @@ def main(argv=None):
     ap.add_argument("--outsides", default="vacuum,extrapolated,absorb", help="refine: outside modes")
     ap.add_argument("--mappings", default=",".join(MAPPINGS), help="refine: mappings")
     ap.add_argument("--out", type=Path, default=Path("reports/light_budget"))
+    ap.add_argument("--merge", nargs="+", type=Path, metavar="REFINE_JSON",
+                    help="render nothing: merge these refine.json files (per scene, mapping and outside, each N "
+                         "from the last file that has it) into one table, refine.json and refine.png in --out")
     args = ap.parse_args(argv)
+    if args.merge:
+        try:
+            rows, grids = merge_refine(args.merge)
+        except InputError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
+        args.out.mkdir(parents=True, exist_ok=True)
+        print(refine_table(rows))
+        with atomic_write(args.out / "refine.json") as tmp:
+            Path(tmp).write_text(json.dumps(rows, indent=1))
+        _plot_refine(rows, grids, args.out / "refine.png")
+        print(f"({len(rows)} rows from {len(args.merge)} files: {args.out / 'refine.json'}, {args.out / 'refine.png'})")
+        return
     try:                                   # every value checked before anything is rendered or written
         scenes, grids, outsides, mappings = _checked(args)
     except InputError as exc:

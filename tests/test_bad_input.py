@@ -332,6 +332,7 @@ LIGHT_BUDGET_CASES = [
     ("outside", ["--outsides", "nowhere"], "--outside: outside: unknown outside 'nowhere'"),
     ("grids", ["--grids", "16,x"], "--grids: grids: '16,x' is not a comma-separated list of integers"),
     ("scene", ["--scenes", "nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
+    ("merge", ["--merge", "nosuch.json"], "nosuch.json: file: cannot be read (No such file or directory)"),
 ]
 
 
