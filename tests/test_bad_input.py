@@ -567,3 +567,17 @@ def test_bad_exrs(cli, tmp_path):
     cli(["compare", tmp_path / "ref.exr", tmp_path / "small.exr"], "small.exr: size: is 4x4")
     cli(["compare", tmp_path / "ref.exr", tmp_path / "text.exr"], "text.exr: file: not a readable OpenEXR file")
     cli(["compare", tmp_path / "ref.exr", tmp_path / "none.exr"], "none.exr: file: does not exist")
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["--against", "no-such-commit"], "--against: against: git has no sslpv_gl/shaders/propagate.comp at "
+                                      "'no-such-commit'"),
+    (["--against", "HEAD", "--N", "64,x"], "--N: N: '64,x' is not a comma-separated list of integers"),
+], ids=["commit", "grids"])
+def test_propagate_benchmark_bad_values(tmp_path, argv, needle):
+    """benchmarks/bench_propagate.py: one line, exit 2, before a GL context is made."""
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_propagate.py"), *argv], cwd=tmp_path,
+                          capture_output=True, text=True, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+                          timeout=120)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith("error: " + needle), proc.stderr
