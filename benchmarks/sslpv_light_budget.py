@@ -239,6 +239,26 @@ def refine_table(rows):
     return "\n".join(lines)
 
 
+def refine_summary(rows):
+    """One line per (mapping, outside): the energy ratio's range over scenes at each N, and the range over
+    scenes of the relMSE's growth factor per doubling of N (``relMSE(2N) / relMSE(N)``)."""
+    out = []
+    for m, o in dict.fromkeys((r["mapping"], r["outside"]) for r in rows):
+        rs = [r for r in rows if (r["mapping"], r["outside"]) == (m, o)]
+        ns = _grids_of(rows, m, o)
+        er = [f"N = {n}: {min(r['energy_ratio'][n] for r in rs if n in r['energy_ratio']):.2f}-"
+              f"{max(r['energy_ratio'][n] for r in rs if n in r['energy_ratio']):.2f}" for n in ns]
+        growth = []
+        for a, b in zip(ns, ns[1:]):
+            f = [r["relmse"][b] / r["relmse"][a] for r in rs if a in r["relmse"] and b in r["relmse"]
+                 and r["relmse"][a] > 0]
+            if f:
+                growth.append(f"{a}->{b}: {min(f):.2f}-{max(f):.2f}x ({sum(x > 1 for x in f)}/{len(f)} grow)")
+        out.append(f"{m}/{o} over {len(rs)} scenes: E/E " + ", ".join(er)
+                   + ("; relMSE per doubling " + ", ".join(growth) if growth else ""))
+    return "\n".join(out)
+
+
 def _grids_of(rows, m, o):
     return sorted({n for r in rows if (r["mapping"], r["outside"]) == (m, o) for n in r["relmse"]})
 
@@ -284,6 +304,8 @@ def main(argv=None):
             raise SystemExit(2) from None
         args.out.mkdir(parents=True, exist_ok=True)
         print(refine_table(rows))
+        print()
+        print(refine_summary(rows))
         with atomic_write(args.out / "refine.json") as tmp:
             Path(tmp).write_text(json.dumps(rows, indent=1))
         _plot_refine(rows, grids, args.out / "refine.png")

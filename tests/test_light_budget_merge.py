@@ -57,6 +57,16 @@ def test_table_shows_missing_cells(lb, tmp_path):
     assert table[3] == "| s2 | -- | 0.90 / -- / -- (0.5 / -- / --) |"
 
 
+def test_summary_ranges_and_growth(lb, tmp_path):
+    rows, _ = lb.merge_refine(_files(tmp_path))
+    lines = lb.refine_summary(rows).splitlines()
+    assert lines[0] == "collision/vacuum over 1 scenes: E/E N = 16: 4.00-4.00"
+    # diffusion: s1 16->32 grows 0.1 -> 0.25 (2.5x), s2 has N = 16 only
+    assert lines[1] == ("diffusion/vacuum over 2 scenes: E/E N = 16: 0.90-1.50, N = 32: 2.50-2.50, "
+                        "N = 64: 3.00-3.00; relMSE per doubling 16->32: 2.50-2.50x (1/1 grow), "
+                        "32->64: 1.20-1.20x (1/1 grow)")
+
+
 def test_merge_writes_json_and_plot(lb, tmp_path, capsys):
     out = tmp_path / "out"
     lb.main(["--merge", *map(str, _files(tmp_path)), "--out", str(out)])
