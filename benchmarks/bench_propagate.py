@@ -43,20 +43,8 @@ def _other_source(rev):
 def _programs(ctx, dirs):
     """The three ACCUMULATE variants of ``propagate.comp`` from the first of ``dirs`` that has it."""
     from sslpv_gl import propagate as P
-    from sslpv_gl import shaders as S
-    from sslpv_gl.grids import LOCAL_SIZE
-    from sslpv_gl.rsm import gl_bytes
-    from sslpv_gl.sh import propagation_matrices
 
-    progs = {}
-    for acc in P.ACC_MODES:
-        prog = ctx.compute_shader(S.load_source("propagate.comp", {"FORMAT": "rgba32f", "LOCAL": LOCAL_SIZE,
-                                                                   "ACCUMULATE": acc}, dirs=dirs))
-        for unit, name in enumerate(P._SAMPLERS):
-            S.set_uniform(prog, name, unit)
-        prog["u_M"].write(gl_bytes(propagation_matrices()))
-        progs[acc] = prog
-    return progs
+    return {acc: P.build_program(ctx, "fp32", acc, [], dirs) for acc in P.ACC_MODES}
 
 
 def bench(ctx, N, kernels, steps, rounds):

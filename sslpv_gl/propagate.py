@@ -53,8 +53,8 @@ ACC_MODES = (ACC_NONE, ACC_FIRST, ACC_ADD)
 _SAMPLERS = ["u_src_r", "u_src_g", "u_src_b", "u_half", "u_hk1", "u_h0"]     # texture units 0-5
 
 
-def build_program(ctx, precision, acc, warnings):
-    """``propagate.comp`` for a grid ``precision`` and accumulation mode ``acc``.
+def build_program(ctx, precision, acc, warnings, dirs=(_sh.SHADER_DIR,)):
+    """``propagate.comp`` (from the first of ``dirs`` that has it) for a grid ``precision`` and accumulation mode ``acc``.
 
     The constant uniforms are set here: the sampler units (source grid 0-2,
     material 3-5) and the six propagation matrices ``u_M``, after checking that they
@@ -64,7 +64,7 @@ def build_program(ctx, precision, acc, warnings):
     matrices = propagation_matrices()
     check_axial(matrices)
     fmt = FORMATS[precision][0]
-    prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc})
+    prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc}, dirs)
     images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
     present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N"],
                                  f"propagate[{precision},acc={acc}]", warnings)
