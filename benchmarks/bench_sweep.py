@@ -19,11 +19,15 @@ default suite; here at ``--size small`` (64x64; wide_slab 60x36) so that the com
 ``LP_NUM_THREADS`` (llvmpipe's threads per worker process) on the sweep given,
 e.g. ``--scenes thin_ring,jade_veins,two_lights --grid 32,64``.
 
+It also prints, per N, the propagation stage time summed over each sweep's tasks and the
+steps they ran (``--summarize DIR`` prints that table for an earlier run's ``--out DIR``).
+
 Run: ``.venv/bin/python benchmarks/bench_sweep.py [--grid 16,32,64,128] [--steps 4,8,16,32,64]``
 """
 
 import argparse
 import json
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -48,6 +52,47 @@ def metrics_by_key(store_path):
         return {c["config_key"]: c["metrics"] for c in st.configs()}
 
 
+def propagation_by_grid(store_path):
+    """Per N: the propagation stage time summed over the sweep's tasks [s] and the steps they ran.
+
+    A grouped row's ``propagation`` timing is that of the steps up to its own K (cumulative),
+    so a group counts once, with its largest K (``shared["group_steps"]``); a single render
+    counts with its own K.
+    """
+    from harness.store import Store
+
+    out = {}
+    with Store(store_path) as st:
+        for c in st.configs():
+            k, shared = c["params"]["steps"], c["shared"]
+            if shared and k != max(shared["group_steps"]):
+                continue
+            row = out.setdefault(c["params"]["N"], {"s": 0.0, "steps": 0})
+            row["s"] += c["timings"].get("propagation", 0.0) / 1e3
+            row["steps"] += k
+    return out
+
+
+def print_propagation(old_store, new_store):
+    """The Markdown table of :func:`propagation_by_grid` for both sweeps, and its rows."""
+    a, b = propagation_by_grid(old_store), propagation_by_grid(new_store)
+    print("\npropagation stage, summed over tasks (worker seconds; two workers run at once):\n"
+          "| N | per-configuration [s] | steps | s/step | grouped [s] | steps | s/step | grouped/per-configuration |\n"
+          "|---|---|---|---|---|---|---|---|")
+    rows = []
+    for n in sorted(set(a) | set(b)):
+        x, y = a.get(n, {"s": 0.0, "steps": 0}), b.get(n, {"s": 0.0, "steps": 0})
+        per = [r["s"] / r["steps"] if r["steps"] else float("nan") for r in (x, y)]
+        ratio = y["s"] / x["s"] if x["s"] else float("nan")
+        print(f"| {n} | {x['s']:.1f} | {x['steps']} | {per[0]:.4f} | {y['s']:.1f} | {y['steps']} | {per[1]:.4f} "
+              f"| {ratio:.3f} |")
+        rows.append({"N": n, "per_config_s": x["s"], "per_config_steps": x["steps"], "grouped_s": y["s"],
+                     "grouped_steps": y["steps"]})
+    tot = [sum(r[k] for r in rows) for k in ("per_config_s", "grouped_s")]
+    print(f"| all | {tot[0]:.1f} | | | {tot[1]:.1f} | | | {tot[1] / tot[0]:.3f} |")
+    return rows
+
+
 def main(argv=None):
     from harness.runs.params import parse_lists
     from harness.runs.sweep import DEFAULT_LP_THREADS, parse_size, resolve_scenes
@@ -65,7 +110,18 @@ def main(argv=None):
                     help="with --table: WORKERSxTHREADS list ('default': llvmpipe's own)")
     ap.add_argument("--out", type=Path, default=None, help="keep the sweeps here (default: a temporary folder)")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON here")
+    ap.add_argument("--summarize", type=Path, default=None,
+                    help="run nothing: the propagation table of an earlier run's --out folder")
     args = ap.parse_args(argv)
+    if args.summarize:
+        stores = [args.summarize / name / "store.sqlite" for name in ("per_config", "grouped")]
+        missing = [str(p) for p in stores if not p.is_file()]
+        if missing:
+            print(f"error: {missing[0]}: file: does not exist; pass the --out folder of a bench_sweep run",
+                  file=sys.stderr)
+            raise SystemExit(2)
+        print_propagation(*stores)
+        return
 
     scenes = resolve_scenes(args.scenes) if args.scenes else list_scenes()
     params = parse_lists({"grid": args.grid, "steps": args.steps})
@@ -100,7 +156,8 @@ def main(argv=None):
               f"ratio grouped/per-configuration = {ratio:.3f} (target <= 0.5); "
               f"{len(a)} configurations, metrics identical: {same}")
         figures.update(old_wall_s=old["wall_s"], new_wall_s=new["wall_s"], ratio=ratio, configurations=len(a),
-                       metrics_identical=same, workers=args.workers, lp_threads=args.lp_threads)
+                       metrics_identical=same, workers=args.workers, lp_threads=args.lp_threads,
+                       propagation=print_propagation(old["store"], new["store"]))
         if not same:
             raise SystemExit("the grouped sweep's metrics differ from the per-configuration sweep's")
     if args.json:

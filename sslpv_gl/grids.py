@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_c00", "read_grid", "write_grid"]
+__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_c00", "read_grid", "support", "write_grid"]
 
 LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster than 4^3 on llvmpipe
 #: precision -> (GLSL image format, moderngl dtype, NumPy dtype)
@@ -106,3 +106,23 @@ def read_c00(texs, precision):
     for col, t in enumerate(texs):
         out[..., col] = np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4)[..., 0]
     return out
+
+
+def support(texs, precision):
+    """The bounds of an SH grid's non-zero cells: ``(lo, hi)``, inclusive ``(x, y, z)`` int arrays, or None.
+
+    A cell counts when any coefficient of any colour is non-zero. None when the
+    whole grid is 0 (then nothing bounds it usefully). What
+    :func:`sslpv_gl.propagate.region` dilates, step by step.
+    """
+    dtype = FORMATS[precision][2]
+    N = texs[0].width
+    nz = np.zeros((N, N, N), dtype=bool)
+    for t in texs:
+        nz |= np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4).any(axis=-1)
+    if not nz.any():
+        return None
+    zyx = [np.flatnonzero(nz.any(axis=tuple(a for a in range(3) if a != axis))) for axis in range(3)]
+    lo = np.array([zyx[2][0], zyx[1][0], zyx[0][0]])       # (x, y, z): the textures are [z, y, x]
+    hi = np.array([zyx[2][-1], zyx[1][-1], zyx[0][-1]])
+    return lo, hi

@@ -19,8 +19,10 @@
      - ``propagate.comp``
      - six-neighbour gather with ``sh.propagation_matrices()`` (their six
        non-zero entries each, ``sh.AXIAL_PATTERN``), ping-pong,
-       accumulation of steps ``k > skip``; a callback after each step lets
-       the renderer shade snapshots or stop at convergence (``steps = auto``)
+       accumulation of steps ``k > skip``; each step only over
+       :func:`region`, the injected support dilated by one cell per step;
+       a callback after each step lets the renderer shade snapshots or stop
+       at convergence (``steps = auto``)
    * - :func:`scale_accumulation`
      - Sec. 3.3
      - ``scale.comp``
@@ -46,7 +48,7 @@ from .rsm import gl_bytes
 from .sh import check_axial, propagation_matrices, scatter_factors
 
 __all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "build_scale_program",
-           "upload_material", "run", "scale_accumulation"]
+           "upload_material", "region", "run", "scale_accumulation"]
 
 ACC_NONE, ACC_FIRST, ACC_ADD = 0, 1, 2
 ACC_MODES = (ACC_NONE, ACC_FIRST, ACC_ADD)
@@ -66,7 +68,7 @@ def build_program(ctx, precision, acc, warnings, dirs=(_sh.SHADER_DIR,)):
     fmt = FORMATS[precision][0]
     prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc}, dirs)
     images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
-    present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N"],
+    present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N", "u_lo", "u_hi"],
                                  f"propagate[{precision},acc={acc}]", warnings)
     for unit, name in enumerate(_SAMPLERS):
         if name in present:
@@ -108,23 +110,51 @@ def _rgba(rgb):
     return a.tobytes()
 
 
-def run(ctx, progs, grid, steps, skip, on_step=None):
+def region(support, step, N):
+    """The cells that step ``step`` (1, 2, ...) computes: ``support`` dilated by ``step`` cells, within the grid.
+
+    ``support`` is ``(lo, hi)``, the inclusive (x, y, z) bounds of the source grid's
+    non-zero cells (:func:`sslpv_gl.grids.support`), or None for the whole grid. A step
+    gathers from the six axial neighbours only, so after ``k`` steps nothing has moved
+    more than ``k`` cells from where it was injected: every cell beyond the region holds
+    exactly 0 (and the accumulation too), which the full-grid step would compute as
+    well. ``lo`` is rounded down to a multiple of the work-group edge, so that the
+    work groups keep the full-grid dispatch's alignment. Returns ``(lo, hi)`` arrays.
+    """
+    if support is None:
+        return np.zeros(3, dtype=int), np.full(3, N - 1, dtype=int)
+    lo, hi = (np.asarray(b, dtype=int) for b in support)
+    lo = np.maximum(lo - step, 0) // LOCAL_SIZE * LOCAL_SIZE
+    return lo, np.minimum(hi + step, N - 1)
+
+
+def run(ctx, progs, grid, steps, skip, on_step=None, support=None):
     """Run up to ``steps`` steps from ``grid.prop_a``; returns ``(textures of the last grid, steps run)``.
 
     ``progs`` maps each of :data:`ACC_MODES` to its :func:`build_program`
     variant for ``grid.precision``. The accumulation grid ``grid.accum`` holds
-    the sum of the grids after steps ``k > skip``. ``on_step(step, textures)``,
-    if given, is called after every step with the propagation grid's textures;
-    it returns True to stop there (convergence, ``steps = auto``).
+    the sum of the grids after steps ``k > skip``. ``support`` (``(lo, hi)``: the
+    (x, y, z) bounds of ``grid.prop_a``'s non-zero cells, :func:`sslpv_gl.grids.support`)
+    limits each step to :func:`region`; the other ping-pong grid and the accumulation
+    are then zeroed first, as the cells beyond the region must read 0. None computes
+    every cell at every step. ``on_step(step, textures)``, if given, is called after
+    every step with the propagation grid's textures; it returns True to stop there
+    (convergence, ``steps = auto``).
     """
+    N = grid.N
     for prog in progs.values():
-        _sh.set_uniform(prog, "u_N", grid.N)
-    if steps <= skip:                                   # nothing accumulated
+        _sh.set_uniform(prog, "u_N", N)
+    if steps <= skip or support is not None:            # nothing accumulated, or cells left out
         clear(grid.accum, grid)
+    if support is not None and steps > 0:               # read beyond step 1's region (step 2, or the caller)
+        clear(grid.prop_b, grid)
     src, dst = grid.prop_a, grid.prop_b
     step = 0
     for step in range(1, steps + 1):
         acc = ACC_NONE if step <= skip else (ACC_FIRST if step == skip + 1 else ACC_ADD)
+        lo, hi = region(support, step, N)
+        _sh.set_uniform(progs[acc], "u_lo", tuple(int(v) for v in lo))
+        _sh.set_uniform(progs[acc], "u_hi", tuple(int(v) for v in hi))
         # rebound each step: a callback may shade (and scale) in between, using the same units
         # units 3-5: u_half, u_hk1, u_h0; step 1 sends the injected light on from every cell
         # (it has crossed the surface inwards), so it takes the source factors without emit
@@ -138,7 +168,7 @@ def run(ctx, progs, grid, steps, skip, on_step=None):
             t.use(unit)
         for unit, t in enumerate(dst):
             t.bind_to_image(unit, read=False, write=True)
-        progs[acc].run(*grid.groups)
+        progs[acc].run(*(int(v) for v in -(-(hi - lo + 1) // LOCAL_SIZE)))
         ctx.memory_barrier()
         src, dst = dst, src                             # ping-pong
         if on_step is not None and on_step(step, src):

@@ -581,3 +581,13 @@ def test_propagate_benchmark_bad_values(tmp_path, argv, needle):
                           timeout=120)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert proc.stderr.startswith("error: " + needle), proc.stderr
+
+
+def test_sweep_benchmark_summarize_missing(tmp_path):
+    """benchmarks/bench_sweep.py --summarize: a folder without both stores is one line, exit 2."""
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_sweep.py"), "--summarize", str(tmp_path)],
+                          cwd=tmp_path, capture_output=True, text=True,
+                          env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith(f"error: {tmp_path / 'per_config' / 'store.sqlite'}: file: does not exist"), \
+        proc.stderr

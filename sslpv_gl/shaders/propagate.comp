@@ -8,6 +8,9 @@
 // and h_d multiplies the whole sum once. A sink cell (emit = 0: outside = absorb or
 // extrapolated, sslpv_gl.boundary) keeps what it receives but sends nothing on, so the
 // SOURCE factors carry emit (u_h0 = h emit, u_hk1 = h k1 emit) and the destination's h does not.
+// The dispatch covers the cells u_lo..u_hi (inclusive), the source grid's non-zero support
+// dilated by one cell per step (sslpv_gl.propagate.run): light moves at most one cell per
+// step, so every cell beyond holds exactly 0, as the host cleared it (issue 14).
 // ACCUMULATE: 0 = propagate only (steps <= skip), 1 = first accumulated step
 // (accum = result), 2 = later steps (accum += result). FORMAT and LOCAL are
 // #defined by the host. Image units are fixed by binding qualifiers
@@ -23,6 +26,8 @@ uniform sampler3D u_hk1;        // h * k1 * emit, k1 = (1 - sp) + sp g (Eq. 3 ba
 uniform sampler3D u_h0;         // h * emit, rgb (source, band 0)
 uniform mat4  u_M[6];           // propagation matrices, sources at +x,-x,+y,-y,+z,-z
 uniform int   u_N;
+uniform ivec3 u_lo;             // first cell of this step's region (x, y, z)
+uniform ivec3 u_hi;             // last cell of this step's region, < u_N
 
 layout(FORMAT, binding = 0) uniform writeonly image3D u_dst_r;
 layout(FORMAT, binding = 1) uniform writeonly image3D u_dst_g;
@@ -68,8 +73,8 @@ void gather(ivec3 d, ivec3 off, int s, int a, int t1, int t2,
 
 void main()
 {
-    ivec3 d = ivec3(gl_GlobalInvocationID);
-    if (any(greaterThanEqual(d, ivec3(u_N)))) return;
+    ivec3 d = u_lo + ivec3(gl_GlobalInvocationID);
+    if (any(greaterThan(d, u_hi))) return;
 
     vec4 out_r = vec4(0.0);                        // gathered coefficients per colour
     vec4 out_g = vec4(0.0);
