@@ -36,7 +36,8 @@ import math
 
 import numpy as np
 
-__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "read_c00", "read_grid", "support", "write_grid"]
+__all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "band0", "read_c00", "read_grid", "read_layers", "support",
+           "write_grid"]
 
 LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster than 4^3 on llvmpipe
 #: precision -> (GLSL image format, moderngl dtype, NumPy dtype)
@@ -85,41 +86,51 @@ def write_grid(texs, c, precision):
         t.write(np.ascontiguousarray(c[..., col, :], dtype=dtype).tobytes())
 
 
-def read_grid(texs, precision):
-    """Three colour textures -> ``(N, N, N, 3, 4)`` float32 ``[z, y, x, colour, coeff]``."""
+def read_layers(texs, precision):
+    """Three colour textures -> their ``(N, N, N, 4)`` arrays ``[z, y, x, coeff]``, one readback each.
+
+    In the grid's own dtype (views of the bytes read). :func:`read_grid`, :func:`band0`
+    and :func:`support` work on them, so that a caller needing two of them reads once.
+    """
     dtype = FORMATS[precision][2]
     N = texs[0].width
-    cols = [np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4) for t in texs]
-    return np.stack(cols, axis=3).astype(np.float32)
+    return [np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4) for t in texs]
 
 
-def read_c00(texs, precision):
-    """Three colour textures -> ``(N, N, N, 3)`` float32 ``[z, y, x, colour]``: the band-0 coefficient only.
+def read_grid(texs, precision):
+    """Three colour textures -> ``(N, N, N, 3, 4)`` float32 ``[z, y, x, colour, coeff]``."""
+    return np.stack(read_layers(texs, precision), axis=3).astype(np.float32)
+
+
+def band0(layers):
+    """:func:`read_layers`' arrays -> ``(N, N, N, 3)`` float32 ``[z, y, x, colour]``: the band-0 coefficient only.
 
     What the renderer's diagnostics need (flux, Eq. 1's ``c00``). At N = 128 a whole grid
     (:func:`read_grid`) is 100 MB and its stacked float32 copy cost more than the read
     itself, once per step count of a step group; this slices each texture's first channel.
     """
-    dtype = FORMATS[precision][2]
-    N = texs[0].width
-    out = np.empty((N, N, N, 3), dtype=np.float32)
-    for col, t in enumerate(texs):
-        out[..., col] = np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4)[..., 0]
+    out = np.empty(layers[0].shape[:3] + (3,), dtype=np.float32)
+    for col, layer in enumerate(layers):
+        out[..., col] = layer[..., 0]
     return out
 
 
-def support(texs, precision):
-    """The bounds of an SH grid's non-zero cells: ``(lo, hi)``, inclusive ``(x, y, z)`` int arrays, or None.
+def read_c00(texs, precision):
+    """Three colour textures -> their :func:`band0` ``(N, N, N, 3)`` float32."""
+    return band0(read_layers(texs, precision))
+
+
+def support(layers):
+    """The bounds of an SH grid's non-zero cells (:func:`read_layers`' arrays): ``(lo, hi)``, inclusive
+    ``(x, y, z)`` int arrays, or None.
 
     A cell counts when any coefficient of any colour is non-zero. None when the
     whole grid is 0 (then nothing bounds it usefully). What
     :func:`sslpv_gl.propagate.region` dilates, step by step.
     """
-    dtype = FORMATS[precision][2]
-    N = texs[0].width
-    nz = np.zeros((N, N, N), dtype=bool)
-    for t in texs:
-        nz |= np.frombuffer(t.read(), dtype=dtype).reshape(N, N, N, 4).any(axis=-1)
+    nz = np.zeros(layers[0].shape[:3], dtype=bool)
+    for layer in layers:
+        nz |= layer.any(axis=-1)
     if not nz.any():
         return None
     zyx = [np.flatnonzero(nz.any(axis=tuple(a for a in range(3) if a != axis))) for axis in range(3)]

@@ -70,7 +70,7 @@ from . import inject as injection
 from . import propagate as propagation
 from . import rsm
 from . import shade as shading
-from .grids import LOCAL_SIZE, GridSet, read_c00, read_grid, support, write_grid
+from .grids import LOCAL_SIZE, GridSet, band0, read_c00, read_grid, read_layers, support, write_grid
 from .material import lpv_material, resample_medium
 from .params import STEP_MODES, SSLPVParams
 from .shade import MAX_LIGHTS
@@ -300,7 +300,7 @@ class SSLPVRenderer:
         grid = self._grid(N, precision)
         propagation.upload_material(grid, material, dx)
         write_grid(grid.prop_a, c0, precision)
-        final, _ = self._propagate(grid, int(steps), int(skip), bounds=support(grid.prop_a, precision))
+        final, _ = self._propagate(grid, int(steps), int(skip), bounds=support(read_layers(grid.prop_a, precision)))
         return read_grid(final, precision), read_grid(grid.accum, precision)
 
     @_current
@@ -396,10 +396,11 @@ class SSLPVRenderer:
         # Outside the stage timers. The steady solve needs the whole injected grid; the
         # diagnostics and the convergence check only its band-0 coefficient (read_c00).
         c0 = read_grid(grid.prop_a, params.precision) if mode == "steady" else None
-        inj = _flux(read_c00(grid.prop_a, params.precision)) if want_diag else None
-        # Where the injected light is (propagate.region): a readback outside the stage timers too,
-        # about 0.1 s at N = 128 on llvmpipe; it spares each step the cells light cannot reach yet.
-        bounds = support(grid.prop_a, params.precision) if mode != "steady" else None
+        # Where the injected light is (propagate.region) comes from the same readback: it spares
+        # each step the cells light cannot reach yet.
+        layers = read_layers(grid.prop_a, params.precision) if want_diag or mode != "steady" else None
+        inj = _flux(band0(layers)) if want_diag else None
+        bounds = support(layers) if mode != "steady" else None
         outside_mask = ~np.asarray(material["inside"], dtype=bool) if want_diag else None
         prop_ms = 0.0                                     # GL time of the propagation so far
         prop_wall = 0

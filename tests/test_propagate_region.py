@@ -13,7 +13,7 @@ import pytest
 
 from sslpv_gl import propagate as P
 from sslpv_gl import twin
-from sslpv_gl.grids import LOCAL_SIZE, read_grid, support, write_grid
+from sslpv_gl.grids import LOCAL_SIZE, read_grid, read_layers, support, write_grid
 from sslpv_gl.params import SSLPVParams
 
 from .test_gl_vs_twin import _check_grid, _random_material
@@ -54,9 +54,9 @@ class TestSupport:
         with gl_renderer.ctx:
             grid = gl_renderer._grid(N, "fp32")
             write_grid(grid.prop_a, c, "fp32")
-            lo, hi = support(grid.prop_a, "fp32")
+            lo, hi = support(read_layers(grid.prop_a, "fp32"))
             write_grid(grid.prop_a, np.zeros_like(c), "fp32")
-            empty = support(grid.prop_a, "fp32")
+            empty = support(read_layers(grid.prop_a, "fp32"))
         assert list(lo) == [4, 5, 2] and list(hi) == [11, 7, 9]     # (x, y, z)
         assert empty is None
 
@@ -89,7 +89,7 @@ class TestRegionPropagation:
         with gl_renderer.ctx:
             grid = gl_renderer._grid(N, "fp32")
             write_grid(grid.prop_a, c0, "fp32")
-            bounds = support(grid.prop_a, "fp32")
+            bounds = support(read_layers(grid.prop_a, "fp32"))
         full = _propagate(gl_renderer, c0, mat, dx, steps, skip, None)
         part = _propagate(gl_renderer, c0, mat, dx, steps, skip, bounds)
         assert np.array_equal(part[0], full[0]), "propagation grid differs from the whole-grid step"
@@ -108,11 +108,11 @@ class TestRegionPropagation:
         params = SSLPVParams(N=32, steps=12, rsm_size=256, inject_size=64)
         seen = []
         real = R.support
-        monkeypatch.setattr(R, "support", lambda texs, precision: seen.append(real(texs, precision)) or seen[-1])
+        monkeypatch.setattr(R, "support", lambda layers: seen.append(real(layers)) or seen[-1])
         part = gl_renderer.render(scene, params)
         lo, hi = seen[0]
         assert np.prod(hi - lo + 1) < 32 ** 3 // 2, "the injected light fills the grid: the test needs a part"
-        monkeypatch.setattr(R, "support", lambda texs, precision: None)
+        monkeypatch.setattr(R, "support", lambda layers: None)
         full = gl_renderer.render(scene, params)
         assert np.array_equal(part.full, full.full) and np.array_equal(part.subsurface, full.subsurface)
         assert part.subsurface[part.mask].max() > 0.0

@@ -9,7 +9,7 @@
 // extrapolated, sslpv_gl.boundary) keeps what it receives but sends nothing on, so the
 // SOURCE factors carry emit (u_h0 = h emit, u_hk1 = h k1 emit) and the destination's h does not.
 // The dispatch covers the cells u_lo..u_hi (inclusive), the source grid's non-zero support
-// dilated by one cell per step (sslpv_gl.propagate.run): light moves at most one cell per
+// dilated by one cell per step (sslpv_gl.propagate.region): light moves at most one cell per
 // step, so every cell beyond holds exactly 0, as the host cleared it (issue 14).
 // ACCUMULATE: 0 = propagate only (steps <= skip), 1 = first accumulated step
 // (accum = result), 2 = later steps (accum += result). FORMAT and LOCAL are
