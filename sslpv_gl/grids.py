@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 __all__ = ["FORMATS", "LOCAL_SIZE", "GridSet", "band0", "read_c00", "read_grid", "read_layers", "support",
-           "write_grid"]
+           "write_grid", "write_layers"]
 
 LOCAL_SIZE = 8          # compute work-group edge: 8^3 measured ~25 % faster than 4^3 on llvmpipe
 #: precision -> (GLSL image format, moderngl dtype, NumPy dtype)
@@ -84,6 +84,16 @@ def write_grid(texs, c, precision):
     dtype = FORMATS[precision][2]
     for col, t in enumerate(texs):
         t.write(np.ascontiguousarray(c[..., col, :], dtype=dtype).tobytes())
+
+
+def write_layers(texs, layers):
+    """Upload :func:`read_layers`' arrays back into three colour textures, byte for byte.
+
+    What a step group uses to restore the injected grid before a second propagation:
+    the bytes read are written unchanged, so the restored grid is the injected one exactly.
+    """
+    for t, layer in zip(texs, layers):
+        t.write(np.ascontiguousarray(layer).tobytes())
 
 
 def read_layers(texs, precision):

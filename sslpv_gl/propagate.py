@@ -48,7 +48,7 @@ from .rsm import gl_bytes
 from .sh import check_axial, propagation_matrices, scatter_factors
 
 __all__ = ["ACC_NONE", "ACC_FIRST", "ACC_ADD", "ACC_MODES", "build_program", "build_scale_program",
-           "upload_material", "region", "run", "scale_accumulation"]
+           "upload_material", "upload_scale", "region", "run", "scale_accumulation"]
 
 ACC_NONE, ACC_FIRST, ACC_ADD = 0, 1, 2
 ACC_MODES = (ACC_NONE, ACC_FIRST, ACC_ADD)
@@ -97,7 +97,19 @@ def upload_material(grid, material, dx):
     half = np.exp(-0.5 * sigma * float(dx))
     for tex, arr in zip(grid.material, (half, half * k1 * emit, half * emit, half * k1)):
         tex.write(_rgba(arr))
-    scale = np.broadcast_to(np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64), shape)
+    return upload_scale(grid, material)
+
+
+def upload_scale(grid, material):
+    """Write ``material``'s per-cell ``radiance_scale`` (default 1) into ``grid.scale``.
+
+    Returns True when it is other than 1 anywhere (shading then reads the accumulation
+    through :func:`scale_accumulation`); nothing is written otherwise. The scale acts
+    after propagation, so a step group whose budgets differ only in their radiance scale
+    shares one propagation and calls this before each shading pass.
+    """
+    N = grid.N
+    scale = np.broadcast_to(np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64), (N, N, N, 3))
     scaled = bool(np.any(scale != 1.0))
     if scaled:
         grid.scale.write(_rgba(scale))

@@ -70,7 +70,7 @@ from . import inject as injection
 from . import propagate as propagation
 from . import rsm
 from . import shade as shading
-from .grids import LOCAL_SIZE, GridSet, band0, read_c00, read_grid, read_layers, support, write_grid
+from .grids import LOCAL_SIZE, GridSet, band0, read_c00, read_grid, read_layers, support, write_grid, write_layers
 from .material import lpv_material, resample_medium
 from .params import STEP_MODES, SSLPVParams
 from .shade import MAX_LIGHTS
@@ -359,17 +359,20 @@ class SSLPVRenderer:
         ctx = self.ctx
         t_wall = time.perf_counter()
         warnings = []
-        t0 = time.perf_counter()
         mode = params.steps if params.steps in STEP_MODES else None
-        res = params.resolved()
-        material = self.lpv_material(scene, params)
+        # What each step count renders with: a calibrated mapping has its own sigma_scale and
+        # radiance_scale per budget (Resolved). Counts that share the mapping family and
+        # sigma_scale share one propagation; the radiance scale acts after it (grid.scale).
+        resolved = {k: params.replace(steps=k).resolved() for k in sorted(set(steps_list))} if mode is None \
+            else {params.steps: params.resolved()}
+        groups = {}
+        for k, res in resolved.items():
+            groups.setdefault((res.family, res.sigma_scale), []).append(k)
         views, centre, radius, w = rsm.light_views(scene)
         warnings += w
         grid = self._grid(params.N, params.precision)
         med = scene.medium
         dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
-        scaled = propagation.upload_material(grid, _with_global_scale(material, res.radiance_scale), dx)
-        host_ms = (time.perf_counter() - t0) * 1e3
         queries = {k: ctx.query(time=True) for k in ("rsm", "injection")}
         stage_wall = {}
 
@@ -397,103 +400,24 @@ class SSLPVRenderer:
         # diagnostics and the convergence check only its band-0 coefficient (read_c00).
         c0 = read_grid(grid.prop_a, params.precision) if mode == "steady" else None
         # Where the injected light is (propagate.region) comes from the same readback: it spares
-        # each step the cells light cannot reach yet.
+        # each step the cells light cannot reach yet; a second propagation restores the grid from it.
         layers = read_layers(grid.prop_a, params.precision) if want_diag or mode != "steady" else None
         inj = _flux(band0(layers)) if want_diag else None
         bounds = support(layers) if mode != "steady" else None
-        outside_mask = ~np.asarray(material["inside"], dtype=bool) if want_diag else None
-        prop_ms = 0.0                                     # GL time of the propagation so far
-        prop_wall = 0
         outputs = []
-
-        def shade_now(steps_used, final):
-            nonlocal prop_ms
-            q = ctx.query(time=True)
-            with stage("shading", q):
-                acc = self._scale(grid) if scaled else None
-                target = self._shade(scene, params, grid, views, shadow_tex, centre, radius, acc)
-            bufs = shading.read_images(target, scene.camera.width, scene.camera.height)  # outside the timers
-            timings = dict(shared)
-            timings["propagation"] = prop_ms
-            timings["shading"] = _gpu_ms(q.elapsed, stage_wall.pop("shading"), "shading", warnings)
-            timings["host_material"] = host_ms
-            diag = None
-            if want_diag:
-                diag = _diagnostics(inj, None if final is None else read_c00(final, params.precision),
-                                    read_c00(grid.accum, params.precision), outside_mask, steps_used)
-            outputs.append((bufs, timings, steps_used, diag))
-
-        if mode == "steady":
-            t = time.perf_counter_ns()
-            from .steady import steady_state
-
-            acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
-                                     skip=params.skip, emit=material["emit"])
-            write_grid(grid.accum, acc, params.precision)
-            ctx.finish()
-            prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost
-            warnings.append(f"steps=steady: accumulation solved on the host ({info.get('method', 'krylov')}, "
-                            f"{info.get('iterations')} iterations); its propagation time is host wall time")
-            shade_now(None, None)
-        else:
-            targets = sorted(set(steps_list)) if mode is None else []
-            last = targets[-1] if targets else params.max_steps
-            if targets and targets[0] <= params.skip:
-                propagation.clear(grid.accum, grid)        # a snapshot before the first accumulated step
-            check_every = 8
-            injected = inj if mode == "auto" else None
-            seg = {"q": None, "t": 0}                      # the running propagation segment
-
-            def begin():
-                ctx.finish()
-                seg["q"] = ctx.query(time=True)
-                seg["t"] = time.perf_counter_ns()
-                seg["q"].__enter__()
-
-            def end():
-                nonlocal prop_ms, prop_wall
-                seg["q"].__exit__(None, None, None)
-                ctx.finish()
-                wall = time.perf_counter_ns() - seg["t"]
-                prop_wall += wall
-                prop_ms += _gpu_ms(seg["q"].elapsed, wall, "propagation", warnings)
-
-            def on_step(step, src):
-                if mode == "auto":
-                    if step % check_every and step != last:
-                        return False
-                    end()                                  # the convergence check is not propagation work
-                    done = step == last or _flux(read_c00(src, params.precision)).max() < \
-                        params.converge_tol * max(float(injected.max()), 1e-300)
-                    if done:
-                        shade_now(step, src)
-                        if step == last:
-                            warnings.append(f"steps=auto: not converged after max_steps={last}")
-                        return True
-                    begin()
-                    return False
-                if step in targets:
-                    end()
-                    shade_now(step, src)
-                    if step == last:
-                        return True
-                    begin()
-                return False
-
-            begin()
-            if last == 0 or (targets and targets[0] == 0):
-                end()
-                shade_now(0, grid.prop_a)
-                if last > 0:
-                    begin()
-            if last > 0:
-                self._propagate(grid, last, params.skip, on_step, bounds)
+        for i, ks in enumerate(groups.values()):
+            if i:                                          # the propagation overwrote the injected grid
+                write_layers(grid.prop_a, layers)
+            outputs += self._propagate_and_shade(scene, params, ks, resolved, grid, dx, c0, bounds, inj, want_diag,
+                                                 (views, shadow_tex, centre, radius), shared, stage, stage_wall,
+                                                 warnings)
+        outputs.sort(key=lambda o: -1 if o[2] is None else o[2])
 
         results = []
-        for bufs, timings, steps_used, diag in outputs:
+        for bufs, timings, steps_used, diag, res in outputs:
             timings["wall"] = (time.perf_counter() - t_wall) * 1e3
             if len(outputs) > 1:
-                timings["shared"] = ["rsm", "injection", "host_material"]
+                timings["shared"] = ["rsm", "injection", "host_material"] if len(groups) == 1 else ["rsm", "injection"]
             mask = bufs[1][..., 3] > 0.5
             results.append(RenderResult(
                 full=np.ascontiguousarray(bufs[0][..., :3]),
@@ -509,6 +433,113 @@ class SSLPVRenderer:
                 calibration=res.calibration,
             ))
         return results
+
+    def _propagate_and_shade(self, scene, params, ks, resolved, grid, dx, c0, bounds, inj, want_diag, light,
+                             shared, stage, stage_wall, warnings):
+        """One propagation from the injected ``grid.prop_a`` with the material of ``ks`` (step counts that share
+        ``resolved[k]``'s family and sigma_scale), shaded at each count with its own radiance scale.
+
+        Returns ``[(buffers, timings, steps_used, diagnostics, resolved), ...]`` in the order shaded.
+        """
+        ctx = self.ctx
+        views, shadow_tex, centre, radius = light
+        mode = params.steps if params.steps in STEP_MODES else None
+        t0 = time.perf_counter()
+        first = params.replace(steps=ks[0]) if mode is None else params
+        material = self.lpv_material(scene, first)
+        scaled = propagation.upload_material(grid, _with_global_scale(material, resolved[ks[0]].radiance_scale), dx)
+        uploaded = resolved[ks[0]].radiance_scale
+        host_ms = (time.perf_counter() - t0) * 1e3
+        outside_mask = ~np.asarray(material["inside"], dtype=bool) if want_diag else None
+        prop_ms = 0.0                                     # GL time of the propagation so far
+        outputs = []
+
+        def shade_now(steps_used, final):
+            nonlocal scaled, uploaded
+            res = resolved[steps_used if mode is None else params.steps]
+            if res.radiance_scale != uploaded:            # a budget of this group with its own radiance scale
+                scaled = propagation.upload_scale(grid, _with_global_scale(material, res.radiance_scale))
+                uploaded = res.radiance_scale
+            q = ctx.query(time=True)
+            with stage("shading", q):
+                acc = self._scale(grid) if scaled else None
+                target = self._shade(scene, params, grid, views, shadow_tex, centre, radius, acc)
+            bufs = shading.read_images(target, scene.camera.width, scene.camera.height)  # outside the timers
+            timings = dict(shared)
+            timings["propagation"] = prop_ms
+            timings["shading"] = _gpu_ms(q.elapsed, stage_wall.pop("shading"), "shading", warnings)
+            timings["host_material"] = host_ms
+            diag = None
+            if want_diag:
+                diag = _diagnostics(inj, None if final is None else read_c00(final, params.precision),
+                                    read_c00(grid.accum, params.precision), outside_mask, steps_used)
+            outputs.append((bufs, timings, steps_used, diag, res))
+
+        if mode == "steady":
+            t = time.perf_counter_ns()
+            from .steady import steady_state
+
+            acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
+                                     skip=params.skip, emit=material["emit"])
+            write_grid(grid.accum, acc, params.precision)
+            ctx.finish()
+            prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost
+            warnings.append(f"steps=steady: accumulation solved on the host ({info.get('method', 'krylov')}, "
+                            f"{info.get('iterations')} iterations); its propagation time is host wall time")
+            shade_now(None, None)
+            return outputs
+
+        targets = sorted(ks) if mode is None else []
+        last = targets[-1] if targets else params.max_steps
+        if targets and targets[0] <= params.skip:
+            propagation.clear(grid.accum, grid)        # a snapshot before the first accumulated step
+        check_every = 8
+        injected = inj if mode == "auto" else None
+        seg = {"q": None, "t": 0}                      # the running propagation segment
+
+        def begin():
+            ctx.finish()
+            seg["q"] = ctx.query(time=True)
+            seg["t"] = time.perf_counter_ns()
+            seg["q"].__enter__()
+
+        def end():
+            nonlocal prop_ms
+            seg["q"].__exit__(None, None, None)
+            ctx.finish()
+            prop_ms += _gpu_ms(seg["q"].elapsed, time.perf_counter_ns() - seg["t"], "propagation", warnings)
+
+        def on_step(step, src):
+            if mode == "auto":
+                if step % check_every and step != last:
+                    return False
+                end()                                  # the convergence check is not propagation work
+                done = step == last or _flux(read_c00(src, params.precision)).max() < \
+                    params.converge_tol * max(float(injected.max()), 1e-300)
+                if done:
+                    shade_now(step, src)
+                    if step == last:
+                        warnings.append(f"steps=auto: not converged after max_steps={last}")
+                    return True
+                begin()
+                return False
+            if step in targets:
+                end()
+                shade_now(step, src)
+                if step == last:
+                    return True
+                begin()
+            return False
+
+        begin()
+        if last == 0 or (targets and targets[0] == 0):
+            end()
+            shade_now(0, grid.prop_a)
+            if last > 0:
+                begin()
+        if last > 0:
+            self._propagate(grid, last, params.skip, on_step, bounds)
+        return outputs
 
     def _scale(self, grid):
         prog = self._program(("scale", grid.precision))

@@ -107,6 +107,33 @@ class TestOutput:
                                                                              t["median_relmse_collision"]))
 
 
+class TestCommittedCalibrations:
+    """A committed calibration's in-sample figures (``calibration.json``) are single renders with its file.
+
+    The calibration scanned each sigma scale once for all integer budgets (one shared propagation,
+    right there: a scan fixes sigma_scale for every count) and applied the radiance scale to the
+    image. Here every budget is one ``render`` through ``--mapping calibrated:FILE`` (never a step
+    group), measured with ``harness.metrics``, on two of the fit's scenes.
+    """
+
+    @pytest.mark.parametrize("family", ["diffusion", "collision"])
+    def test_in_sample_figures_are_single_renders(self, gl_renderer, family):
+        folder = Path(__file__).resolve().parent.parent / "baselines" / "calibrated" / family
+        info = json.loads((folder / "calibration.json").read_text())
+        cal = load_calibrated(folder / "calibrated.toml", tuple(MAPPINGS))
+        assert len(cal.budgets) == 5
+        for b in cal.budgets:
+            res = info["results"][f"N={b.N} steps={b.steps}"]
+            assert (res["sigma_scale"], res["radiance_scale"]) == (b.sigma_scale, b.radiance_scale)
+            for name in ("sphere_homogeneous", "thin_ring"):
+                p = SSLPVParams(N=b.N, steps=b.steps, mapping=f"calibrated:{folder / 'calibrated.toml'}",
+                                **cal.settings)
+                rel, energy = _relmse_energy(gl_renderer, name, p)
+                want = res["in_sample"][name]
+                assert rel == pytest.approx(want["relmse"], rel=1e-5), (b.steps, name)
+                assert energy == pytest.approx(want["energy_ratio"], rel=1e-5), (b.steps, name)
+
+
 class TestBadInput:
     @pytest.mark.parametrize("argv, where", [
         (["--family", "magic"], "--family: family: unknown mapping family 'magic'"),

@@ -320,4 +320,19 @@ MUTATIONS = (
              'outside_mask = np.asarray(material["inside"], dtype=bool)',
              ("tests/test_gl_vs_twin_modes.py::TestModesEndToEnd::test_accumulation_and_shading",),
              "diagnostics: the share of accumulated energy 'outside' summed over the cells inside the mesh"),
+    Mutation("group_one_budget_for_every_k", "mapping", "sslpv_gl/renderer.py",
+             "resolved = {k: params.replace(steps=k).resolved() for k",
+             "resolved = {k: params.resolved() for k",
+             ("tests/test_grouped_mappings.py",),
+             "step groups: every count rendered with the base count's calibrated budget (one sigma and "
+             "radiance scale for the whole group)"),
+    Mutation("group_second_propagation_not_reinjected", "mapping", "sslpv_gl/renderer.py",
+             "                write_layers(grid.prop_a, layers)\n", "                pass\n",
+             ("tests/test_grouped_mappings.py::test_budgets_that_differ_in_sigma_scale",),
+             "step groups: a second propagation (another sigma scale) starts from the last one's grid, "
+             "not from the injected one"),
+    Mutation("group_radiance_scale_not_reuploaded", "mapping", "sslpv_gl/renderer.py",
+             "if res.radiance_scale != uploaded:", "if False:",
+             ("tests/test_grouped_mappings.py::test_budgets_that_differ_in_radiance_scale_only",),
+             "step groups: every count of a shared propagation shaded with the first count's radiance scale"),
 )
