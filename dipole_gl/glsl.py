@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from sslpv_gl.shaders import SHADER_DIR as SSLPV_SHADER_DIR
-from sslpv_gl.shade import MAX_LIGHTS
+from sslpv_gl.rsm import MAX_LIGHTS
 
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 #: Our files first, then SSLPV's (sh.glsl, optics.glsl, shadow.glsl, reflection.glsl, shade.vert).

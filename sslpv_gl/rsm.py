@@ -60,10 +60,13 @@ import numpy as np
 
 from . import shaders as _sh
 
-__all__ = ["LightView", "bounding_sphere", "look_at", "perspective", "light_view", "light_views",
+__all__ = ["MAX_LIGHTS", "LightView", "bounding_sphere", "look_at", "perspective", "light_view", "light_views",
            "camera_view_proj", "gl_bytes", "MAX_RSM_HALF_FOV_DEG", "build_program", "render_maps",
            "render_shadow_atlas", "set_light_uniforms", "read_texels"]
 
+#: Lights a render takes at most: the length of the light arrays of every stage that loops over the
+#: lights (SSLPV's ``shade.frag``, the rivals' ``irradiance.comp``; the ``MAX_LIGHTS`` define).
+MAX_LIGHTS = 8
 #: Upper bound of the RSM half field of view (a light inside the bounding
 #: sphere would otherwise need a frustum wider than 180 degrees).
 MAX_RSM_HALF_FOV_DEG = 75.0

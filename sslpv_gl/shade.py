@@ -31,11 +31,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import shaders as _sh
-from .rsm import camera_view_proj, gl_bytes, set_light_uniforms
+from .rsm import MAX_LIGHTS, camera_view_proj, gl_bytes, set_light_uniforms
 
 __all__ = ["MAX_LIGHTS", "build_program", "run", "read_images"]
-
-MAX_LIGHTS = 8          # length of shade.frag's light arrays (the MAX_LIGHTS define)
 
 
 def build_program(ctx, lookup, warnings):

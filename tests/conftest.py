@@ -14,9 +14,19 @@ themselves.
 (:mod:`tests.synthetic_store`) for the session, shared by the report tests and the
 browser tests; tests that need another site build it in their own ``tmp_path``,
 and a test that adds a page to this one removes it again.
+
+Every test has a result cache and a report memo of its own (``SSLPV_RESULT_CACHE`` and
+``SSLPV_REPORT_CACHE`` in its ``tmp_path``: :mod:`harness.runs.cache`, :mod:`harness.report.memo`): a sweep in one test never serves another test's renders, and
+nothing is written to the repository's ``cache/``.
 """
 
 import pytest
+
+
+@pytest.fixture(autouse=True)
+def _own_result_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("SSLPV_RESULT_CACHE", str(tmp_path / "result-cache"))
+    monkeypatch.setenv("SSLPV_REPORT_CACHE", str(tmp_path / "report-cache"))
 
 
 def _renderer(make, release):

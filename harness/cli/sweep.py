@@ -17,6 +17,8 @@ def configure(sp):
     sp.add_argument("--size", help="image size WxH for SSLPV and reference, or small (each scene at its committed "
                     "small size, same aspect); default: the scene's")
     sp.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    sp.add_argument("--no-cache", action="store_true", help="render every configuration afresh instead of serving "
+                    "it from the result cache (cache/results; harness.runs.cache)")
     add_sslpv_args(sp, multi=True)
     add_method_args(sp, multi=True)
 

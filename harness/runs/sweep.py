@@ -91,6 +91,7 @@ from harness.runs.params import CLI_TO_FIELD, FIELD_TO_CLI, any_product_model, c
 from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, SweepSize, read_json, validate
 
 from harness.reference.committed import sized_scene
+from harness.runs.cache import SweepCache, open_cache, workers_gl_renderer
 from harness.scene import list_scenes, load_scene, scene_path
 
 
@@ -414,7 +415,7 @@ def _group_cost(g):
     return p.N ** 3 * max(max(ks), 1)
 
 
-def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_threads=None):
+def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_threads=None, cache=True):
     """Run (or resume) a sweep; returns what it wrote and measured.
 
     Everything that can be wrong with the input (scenes, parameters, the scheduler,
@@ -425,6 +426,12 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     its own (the sweep before step groups; kept for the benchmark). Both record the
     same rows, with bit-identical images and metrics. ``lp_threads`` sets
     ``LP_NUM_THREADS`` for a LocalCluster's workers (see :data:`DEFAULT_LP_THREADS`).
+
+    ``cache``: the result cache (:mod:`harness.runs.cache`) that configurations are served from
+    and stored in: True for the default folder, a :class:`~harness.runs.cache.ResultCache`, or
+    False to render everything afresh (``--no-cache``). A served configuration is recorded like a
+    rendered one, with its metrics computed now against this sweep's reference, and its store row
+    names the cache entry (``cached_from``).
     """
     from harness.progress import Progress
     from harness.store import Store
@@ -443,6 +450,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     check_sweep_folder(out)
     check_writable(store_path, "--store")
     Store.check(store_path)                  # another program's database, a corrupt or newer store: refused
+    results_cache = open_cache(cache)   # a folder that is not a result cache: refused here
     client, cluster = make_client(scheduler, workers, lp_threads) if scheduler else (None, None)
     try:
         with claim_sweep_folder(out):        # held until the sweep ends: a second sweep here is refused
@@ -463,6 +471,17 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                            "sweep_json": str(out / SWEEP_FILE), "configurations": len(scenes) * len(configs),
                            "skipped_done": len(scenes) * len(configs) - len(todo), "ok": 0, "failed": 0,
                            "not_run": 0, "references": {k: str(v) for k, v in refs.items()}, "gl_renderer": None}
+                summary["reused"] = 0
+                if results_cache is not None and todo:
+                    reuse = SweepCache(results_cache, workers_gl_renderer(client), refs)
+                    hits, todo = reuse.split(todo, method_of)
+                    _record_cached(store, run_id, hits, arrays, out, refs, summary)
+                    if progress and (hits or results_cache.rejected):
+                        Progress("sweep", None).log(f"result cache {results_cache.root}: {len(hits)} of "
+                                                    f"{len(hits) + len(todo)} configurations reused, "
+                                                    f"{len(todo)} to render")
+                else:
+                    reuse = None
                 # SSLPV in step groups; another method's configuration alone (harness.runs.rivals), one "group" each
                 groups = group_configs([t for t in todo if method_of(t[1]) == "sslpv"], group)
                 groups += [(s, p, [(None, key)]) for s, p, key in todo if method_of(p) != "sslpv"]
@@ -477,7 +496,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                         client, cluster = make_client(None, workers, lp_threads)
                     _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress,
                               render_refs=render_refs,
-                              ref_threads=None if scheduler else _local_ref_threads(client))
+                              ref_threads=None if scheduler else _local_ref_threads(client), reuse=reuse)
                     summary["references"] = {k: str(v) for k, v in refs.items() if v is not None}
                 # A run with failed (or never rendered) configurations stays open: the same command
                 # retries them, and the command line exits non-zero.
@@ -488,8 +507,26 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                     summary["resume"] = f"sslpv-harness sweep --config {out / SWEEP_FILE}"
     finally:
         _close_cluster(client, cluster, progress)
+        if results_cache is not None:
+            results_cache.prune()
     summary["wall_s"] = round(time.perf_counter() - t0, 2)
     return summary
+
+
+def _record_cached(store, run_id, hits, arrays, out, refs, summary):
+    """Record configurations served by the result cache, measured now against this sweep's references."""
+    from harness.io.images import auto_exposure
+
+    from harness.runs import worker as sweep_worker
+
+    floors = {}
+    for s, p, key, res in hits:
+        arr = arrays[s.name]
+        if s.name not in floors:
+            floors[s.name] = (sweep_worker.reference_floors(arr), auto_exposure(arr["subsurface"]))
+        res["metrics"] = sweep_worker.measure(res["images"], arr, floors[s.name][0])
+        _record(store, run_id, s, p, key, res, out, refs, summary, floors[s.name][1])
+        summary["reused"] += 1
 
 
 def _close_cluster(client, cluster, progress):
@@ -531,7 +568,7 @@ def _local_ref_threads(client):
 
 
 def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, progress, render_refs=(),
-              ref_threads=None):
+              ref_threads=None, reuse=None):
     """Submit every step group, then record each configuration as its group arrives (client-side only).
 
     ``render_refs``: scenes whose reference is missing. Their reference jobs run on the same
@@ -554,6 +591,8 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
     the first configuration of a group of two or more; nothing else of that group is
     recorded. Only for the tests: run it in a process group of its own.
     ``SSLPV_SWEEP_KILL_WORKERS=1`` makes every task kill its worker (``harness.runs.worker``).
+
+    ``reuse`` (a :class:`~harness.runs.cache.SweepCache`) stores each rendered configuration.
     """
     from harness.io.images import auto_exposure
     from harness.progress import Progress
@@ -666,11 +705,15 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
                         results = [{"status": "failed", "error": err} for _ in members]
                     if rivals.method_of(p) != "sslpv":     # another method's configuration (one result)
                         res = results if isinstance(results, dict) else results[0]
+                        if reuse is not None:
+                            reuse.put(members[0][1], res)
                         _record(store, run_id, s, p, members[0][1], res, out, refs, summary, shared[s.name][2])
                         bar.advance(failed=int(res["status"] != "ok"), detail=f"{s.name} {p.label()}")
                         continue
                     for n_recorded, ((k, key), res) in enumerate(zip(members, results)):
                         pk = p.replace(steps=k)
+                        if reuse is not None:
+                            reuse.put(key, res)
                         _record(store, run_id, s, pk, key, res, out, refs, summary, shared[s.name][2])
                         bar.advance(failed=int(res["status"] != "ok"),
                                     detail=f"{s.name} N={pk.N} K={pk.steps} {pk.mapping}")
@@ -717,7 +760,8 @@ def _record(store, run_id, s, p, key, res, out, refs, summary, exposure):
                         reference_dir=str(refs[s.name]) if refs.get(s.name) else None,
                         steps_used=res.get("steps_used"),
                         diagnostics=res.get("diagnostics"), calibration=res.get("calibration"),
-                        shared=res.get("shared"), precompute=res.get("precompute"), work=res.get("work"))
+                        shared=res.get("shared"), precompute=res.get("precompute"), work=res.get("work"),
+                        cached_from=res.get("cached"))
 
 
 def _crash():
@@ -743,7 +787,8 @@ def _resume_or_start(store, cfg, out):
 def run_sweep_cli(args):
     """``sslpv-harness sweep``: progress on stderr (``harness.progress``), the summary on stdout."""
     cfg = config_from_args(args)
-    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
+                     cache=not getattr(args, "no_cache", False))
 
 
 __all__ = ["SweepConfig", "run_sweep", "run_sweep_cli", "FIELD_TO_CLI"]

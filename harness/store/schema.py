@@ -25,7 +25,10 @@ table              columns
                    ``--method`` that rendered it; ``sslpv`` for every older row),
                    precompute_json (``{step: {"ms", "work"}}``: the method's
                    precomputation, kept apart from the frame) and work_json
-                   (``{stage: count}``: device-independent work per frame stage)
+                   (``{stage: count}``: device-independent work per frame stage);
+                   since v4 also cached_from (the key of the result-cache entry
+                   the configuration was served from, ``harness.runs.cache``; NULL
+                   when it was rendered in its run)
 ``metrics``        config_id, image (``subsurface`` | ``full``), metric, value,
                    noise_floor, per_channel_json, params_json;
                    PRIMARY KEY(config_id, image, metric)
@@ -142,6 +145,13 @@ def _migration_3(db):
     """)
 
 
+def _migration_4(db):
+    """The result-cache entry a configuration was served from (NULL: rendered in its run)."""
+    _run_script(db, """
+        ALTER TABLE configurations ADD COLUMN cached_from TEXT
+    """)
+
+
 def _run_script(db, script):
     """Run ``;``-separated DDL statement by statement (``executescript`` would
     COMMIT the migration's transaction half-way)."""
@@ -153,7 +163,7 @@ def _run_script(db, script):
 #: Ordered schema migrations; ``MIGRATIONS[i]`` takes the schema from version
 #: ``i`` to ``i + 1``. Each runs inside the transaction that bumps
 #: ``user_version``, so a failed migration leaves the store as it was.
-MIGRATIONS = [_migration_1, _migration_2, _migration_3]
+MIGRATIONS = [_migration_1, _migration_2, _migration_3, _migration_4]
 
 
 def schema_version():

@@ -396,7 +396,8 @@ class Store:
 
     def record_config(self, run_id, scene, scene_hash, params, status, error=None, metrics=(),
                       timings=None, render_dir=None, reference_dir=None, steps_used=None, diagnostics=None,
-                      calibration=None, shared=None, method="sslpv", precompute=None, work=None, stages=None):
+                      calibration=None, shared=None, method="sslpv", precompute=None, work=None, stages=None,
+                      cached_from=None):
         """Record one configuration with its metrics and timings in ONE transaction.
 
         Either everything is written or nothing is (a bad metric value rolls
@@ -442,6 +443,9 @@ class Store:
         stages : sequence of str, optional
             The method's frame stages that ``timings`` may name (besides ``total``);
             default SSLPV's (:data:`STAGES`).
+        cached_from : str, optional
+            The result-cache key the render was served from (``harness.runs.cache``);
+            None when it was rendered in this run.
 
         Returns
         -------
@@ -489,13 +493,14 @@ class Store:
             cur = db.execute(
                 "INSERT INTO configurations (run_id, scene, scene_hash, config_key, params_json, status,"
                 " error, render_dir, reference_dir, created_at, steps_used, diagnostics_json, calibration_json,"
-                " shared_json, method, precompute_json, work_json) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " shared_json, method, precompute_json, work_json, cached_from)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (run_id, str(scene), str(scene_hash), key, params_json, status,
                  None if error is None else str(error),
                  None if render_dir is None else str(render_dir),
                  None if reference_dir is None else str(reference_dir), _now(), steps_used,
                  extra["diagnostics"], extra["calibration"], extra["shared"], method, extra["precompute"],
-                 extra["work"]))
+                 extra["work"], None if cached_from is None else str(cached_from)))
             cid = cur.lastrowid
             # Rows are checked one at a time as they are inserted; a bad one
             # raises inside the transaction and everything above rolls back.
