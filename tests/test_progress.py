@@ -109,3 +109,25 @@ def test_bar_mode_renders(monkeypatch):
                                      (float("nan"), "?"), (-1, "?")])
 def test_format_duration(s, text):
     assert format_duration(s) == text
+
+
+@pytest.mark.parametrize("argv, target", [
+    (["reference", "sphere_homogeneous", "--json"], ("harness.runs.references", "run_reference_cmd")),
+    (["sweep", "--scenes", "thin_ring", "--grid", "8", "--steps", "4", "--out", "x", "--json"],
+     ("harness.runs.sweep", "run_sweep")),
+    (["calibrate", "--family", "diffusion", "--out", "x", "--json"], ("harness.calibration.run", "run_calibrate")),
+])
+def test_json_never_silences_progress(monkeypatch, argv, target):
+    """``--json`` puts the result on stdout; progress still goes to stderr (only ``--no-progress`` stops it)."""
+    import importlib
+
+    from harness.cli import main
+
+    seen = {}
+    monkeypatch.setattr(importlib.import_module(target[0]), target[1],
+                        lambda *a, **k: seen.update(k) or {"status": "finished"})
+    main(argv)
+    assert seen.get("progress") is True, seen
+    seen.clear()
+    main(argv + ["--no-progress"])
+    assert seen.get("progress") is False, seen

@@ -16,6 +16,11 @@ def configure(sp):
     sp.add_argument("--scheduler", help="address of an existing Dask scheduler")
     sp.add_argument("--method", help="comma-separated methods: run only the matrix's products of these "
                                      "(sslpv | dipole | dirpole; default: every product of the matrix)")
+    sp.add_argument("--size", help="image size of the night: small (each scene at its committed small size, "
+                    "judged against the committed references and baselines), own (each scene's own size, its "
+                    "Mitsuba reference rendered into cache/references first) or WxH; default: the matrix's size")
+    sp.add_argument("--no-cache", action="store_true", help="render every configuration afresh instead of serving "
+                    "unchanged ones from the result cache (cache/results)")
 
 
 def run(args):

@@ -33,5 +33,5 @@ def run(args):
                                variant=args.variant, force=args.force, max_minutes=args.max_minutes,
                                estimate=args.estimate, size=args.size, workers=args.workers,
                                scheduler=args.scheduler, serial=args.serial,
-                               progress=not (args.no_progress or args.json))
+                               progress=not args.no_progress)
     return result, result.get("summary") if args.estimate else None, 0

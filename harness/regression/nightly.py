@@ -274,6 +274,7 @@ def trend_plots(store, night_run_ids, out_dir):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     from harness.report.plots import steps_key
 
@@ -295,6 +296,9 @@ def trend_plots(store, night_run_ids, out_dir):
                 ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
                         color=colour, ls=styles[steps.index(k) % len(styles)], label=(f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k))
             ax.set_yscale("log")
+            # No minor ticks: on a log axis shared by five panels they are most of a figure's time
+            # (matplotlib copies every tick's style), and the nights' values need only the decades.
+            ax.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
             ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
                          fontsize=9)
             ax.tick_params(axis="x", labelrotation=30, labelsize=7)
@@ -336,7 +340,9 @@ def write_index(out_root):
 
 
 def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, workers=None, progress=True,
-                methods=None):
+                methods=None, size=None, cache=True):
+    """Run the night (see the module docstring); ``size`` ("small", "own" or ``[W, H]``) overrides the matrix's,
+    ``cache`` is :func:`harness.runs.sweep.run_sweep`'s."""
     from harness.progress import Progress
     from harness.runs.sweep import SweepConfig, run_sweep
     from harness.store import Store
@@ -356,11 +362,13 @@ def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, w
     # --out, a folder that cannot be written, another program's or a corrupt store
     check_nightly_folder(out_root)
     Store.check(store_path)
+    if size is not None:                          # nightly --size: small, own (None: each scene's own) or [W, H]
+        matrix["size"] = None if size == "own" else size
     cfg = SweepConfig(scenes=matrix["scenes"], params=matrix["params"], out=str(out_root / "runs" / night),
                       store=str(store_path), size=matrix["size"], kind="nightly")
     with Progress("nightly", 3, unit="steps", enabled=progress) as steps:
         steps.log(f"{night}: the matrix {matrix['path']}, {len(matrix['scenes'])} scenes, store {store_path}")
-        summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress)
+        summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress, cache=cache)
         check_nightly_folder(out_root, mark=True)
         steps.advance(failed=int(summary["status"] != "finished"),
                       detail=f"sweep {summary['status']}: {summary['ok']} ok, {summary['failed']} failed")
@@ -384,6 +392,13 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
         judged = judge_night(st, run_id, prev[0] if prev else None, summary["references"], matrix["scenes"],
                              matrix["size"], tol)
         changes = judged["changes"]
+        tonight = [c for c in st.configs(run_id=run_id) if c["status"] == "ok"]
+        reused = {(c["scene"], _label(c)) for c in tonight if c.get("cached_from")}
+        rendered = sorted(f"{c['scene']} {_label(c)}" for c in tonight if not c.get("cached_from"))
+        rendered_methods = {}
+        for c in tonight:
+            if not c.get("cached_from"):
+                rendered_methods[c.get("method", "sslpv")] = rendered_methods.get(c.get("method", "sslpv"), 0) + 1
         changed_pairs = [r for r in judged["images"] if r["changed"]]
         verdict = overall(changes, image_changed=bool(changed_pairs))
         steps.advance(detail=f"verdict: {verdict}")
@@ -407,7 +422,9 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
                     "improvements": [c.as_dict() for c in shown if c.verdict == "improvement"],
                     "within_noise": [c.as_dict() for c in shown if c.verdict == "changed-within-noise"],
                     "tolerance": tol, "alpha": ALPHA, "image_tolerance": {"rtol": IMAGE_RTOL, "atol": IMAGE_ATOL},
-                    "wall_s": summary.get("wall_s")}
+                    "wall_s": summary.get("wall_s"), "reused": len(reused), "rendered": rendered,
+                    "rendered_methods": rendered_methods,
+                    "reused_changes": sorted({f"{c.scene} {c.config}" for c in shown if (c.scene, c.config) in reused})}
             (tmp / "night.json").write_text(json.dumps(info, indent=1))
             (tmp / "index.html").write_text(_render("night.html.j2", info=info, trends=trends, changes=shown))
     index = write_index(out_root)
@@ -417,7 +434,7 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
            "improvements": len(info["improvements"]), "changed_images": len(info["changed_images"]),
            "notes": info["notes"], "configurations": summary["configurations"],
            "failed": summary["failed"], "not_run": summary.get("not_run", 0), "status": summary["status"],
-           "sweep_wall_s": summary.get("wall_s")}
+           "sweep_wall_s": summary.get("wall_s"), "reused": len(reused), "rendered": len(rendered)}
     if summary["status"] != "finished":
         out["resume"], out["error"] = summary.get("resume"), summary.get("error")
     return out
@@ -425,5 +442,9 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
 
 def run_nightly_cli(args):
     """Progress on stderr (``harness.progress``); the result on stdout."""
+    from harness.runs.sweep import parse_size
+
+    size = getattr(args, "size", None)
+    size = "own" if size is not None and size.strip().lower() == "own" else parse_size(size)
     return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler,
-                       methods=getattr(args, "method", None))
+                       methods=getattr(args, "method", None), size=size, cache=not getattr(args, "no_cache", False))

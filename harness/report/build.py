@@ -37,6 +37,7 @@ from harness.errors import InputError
 from harness.metrics.coverage import comparison_mask
 from harness.store import STAGES, Store
 from . import plots
+from .memo import Memo, configs_digest, default_memo_dir
 
 HERE = Path(__file__).resolve().parent
 IMAGE_KINDS = ("subsurface", "full")
@@ -54,7 +55,7 @@ FLIPMAP = {"cmap": "magma", "vmin": 0.0, "vmax": 1.0}
 
 
 def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=None, extra_sections=None,
-                 *, rank=("subsurface", "relmse"), flip_maps=True):
+                 *, rank=("subsurface", "relmse"), flip_maps=True, memo=True):
     """Write the report of one run of ``store_path`` to ``out_dir`` (replaced atomically).
 
     Parameters
@@ -133,6 +134,7 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
     else:
         flip_note = "disabled (flip_maps=False)."
 
+    memo = Memo(default_memo_dir()) if memo is True else (memo or Memo(None))
     env = _environment()
     title = title or f"SSLPV vs Mitsuba 3 \u2014 run {run['id']} ({run['kind']}, {run['date']})"
     common = {"title": title, "run": run, "generated_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -152,11 +154,13 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
                          "relative error |test \u2212 ref| / (ref + \u03b5)")
         plots.colour_bar(static / "cbar_flip.png", FLIPMAP["cmap"], FLIPMAP["vmin"], FLIPMAP["vmax"],
                          "FLIP error", extend="neither")
-        for scene, cs in by_scene.items():
+        jobs = [(common, site / "scenes" / slugs[scene], scene, cs, budget, flip_compute is not None, flip_note,
+                 methods, memo.root) for scene, cs in by_scene.items()]
+        for (scene, _), (info, page_notes, cs, counts) in zip(by_scene.items(), _pages(jobs)):
+            notes += page_notes
+            memo.hits, memo.misses = memo.hits + counts[0], memo.misses + counts[1]
             slug = slugs[scene]
             href = f"scenes/{slug}/index.html"
-            info = _scene_page(env, common, site / "scenes" / slug, scene, cs, budget, flip_compute, flip_note,
-                               notes, methods)
             pages[scene] = out_dir / href
             for c in (info["best"], info["worst"]):
                 if c is not None:
@@ -185,13 +189,49 @@ def build_report(store_path, out_dir, run_id=None, cost_budget_ms=None, title=No
 
     return {"out_dir": out_dir, "index": out_dir / "index.html", "scene_pages": pages, "run_id": run["id"],
             "budget_ms": budget, "budget_rule": rule, "n_configs": len(configs), "n_failed": len(failed),
-            "notes": notes}
+            "notes": notes, "pictures": {"kept": memo.hits, "drawn": memo.misses}}
 
 
 # ------------------------------------------------------------------ one scene
 
-def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_note, notes, methods=("sslpv",)):
-    """Write one scene's folder (images, EXRs, plots, index.html); returns its summary."""
+#: Scene pages are drawn in parallel (one process per core) from this many scenes on.
+PARALLEL_FROM = 4
+
+
+def _pages(jobs):
+    """Each job's scene page (:func:`_page_job`), in order: in processes of their own when there are
+    :data:`PARALLEL_FROM` scenes or more and more than one core (a page's pictures are independent of
+    every other page's), else here."""
+    workers = min(len(jobs), os.cpu_count() or 1)
+    if workers > 1 and len(jobs) >= PARALLEL_FROM:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            return list(pool.map(_page_job, jobs))
+    return [_page_job(job) for job in jobs]
+
+
+def _page_job(job):
+    """One scene page from a picklable job -> ``(its summary, its notes, its configurations as shown,
+    (memo hits, memo misses))``."""
+    common, folder, scene, cs, budget, flip_on, flip_note, methods, memo_root = job
+    flip_compute = None
+    if flip_on:
+        from harness.metrics import compute as flip_compute
+    notes = []
+    memo = Memo(memo_root)
+    info = _scene_page(_environment(), common, folder, scene, cs, budget, flip_compute, flip_note, notes, methods,
+                       memo)
+    return info, notes, cs, (memo.hits, memo.misses)
+
+
+def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_note, notes, methods=("sslpv",),
+                memo=None):
+    """Write one scene's folder (images, EXRs, plots, index.html); returns its summary.
+
+    ``memo`` (:class:`harness.report.memo.Memo`) serves pictures whose inputs were drawn before."""
+    memo = memo or Memo(None)
     img_dir, exr_dir, plot_dir = folder / "img", folder / "exr", folder / "plots"
     for d in (img_dir, exr_dir, plot_dir):
         d.mkdir(parents=True, exist_ok=True)
@@ -218,7 +258,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
         ref = ref_of[c["reference_dir"]]
         views = {}
         for kind in IMAGE_KINDS:
-            views[kind] = _views(c, kind, ref, img_dir, exr_dir, flip_compute, scene_notes)
+            views[kind] = _views(c, kind, ref, img_dir, exr_dir, flip_compute, scene_notes, memo)
         cards.append({**c, "views": views, "timing_list": [(s, c["timings"][s]) for s in STAGES
                                                           if s in c["timings"]]})
 
@@ -238,24 +278,24 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
             tag = f"{image}_{metric}"
             if gridded:
                 p = plot_dir / f"{tag}_vs_steps.png"
-                plots.error_vs_param(cs_plot, image, metric, p, "steps", gk)
+                _plot(memo, plots.error_vs_param, cs_plot, image, metric, p, "steps", gk)
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs steps",
                                   "caption": f"{metric} ({image}) vs propagation steps, one line per grid "
                                              f"resolution {gk}; dotted: median noise floor."})
             if refined:        # grid refinement: also for steps = steady or auto alone
                 p = plot_dir / f"{tag}_vs_grid.png"
-                plots.error_vs_param(cs_plot, image, metric, p, gk, "steps")
+                _plot(memo, plots.error_vs_param, cs_plot, image, metric, p, gk, "steps")
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs grid",
                                   "caption": f"{metric} ({image}) vs grid resolution {gk}, one line per step "
                                              f"count (steady: the converged accumulation)."})
             if gridded:
                 p = plot_dir / f"{tag}_heatmap.png"
-                plots.heatmap(cs_plot, image, metric, p)
+                _plot(memo, plots.heatmap, cs_plot, image, metric, p)
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} heat map",
                                   "caption": f"{metric} ({image}) over grid resolution {gk} \u00d7 steps."})
             if any(c["cost_ms"] is not None for c in cs_plot):
                 p = plot_dir / f"{tag}_vs_cost.png"
-                plots.error_vs_cost(cs_plot, image, metric, p, budget)
+                _plot(memo, plots.error_vs_cost, cs_plot, image, metric, p, budget)
                 plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs cost",
                                   "caption": f"{metric} ({image}) vs SSLPV cost; circled and joined: the Pareto "
                                              f"front (no configuration is both cheaper and better)."})
@@ -263,7 +303,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
             plot_notes.append(f"The parameters have no '{gk}' and 'steps': plots over them are left out.")
         if gridded and any(plots.value(c, "subsurface", "energy_ratio") is not None for c in cs_plot):
             p = plot_dir / "energy_vs_steps.png"
-            plots.energy_vs_steps(cs_plot, p)
+            _plot(memo, plots.energy_vs_steps, cs_plot, p)
             plot_list.append({"src": _rel(p, folder), "title": "energy ratio vs steps",
                               "caption": "Left: energy ratio sum(SSLPV)/sum(reference) of the subsurface image vs "
                                          "steps, with the ratios implied by the paper's compensation factors "
@@ -272,7 +312,7 @@ def _scene_page(env, common, folder, scene, configs, budget, flip_compute, flip_
                                          "1/energy ratio where it is not stored) vs the paper's factors."})
 
     best, best_note, worst = _best_worst(ok, budget)
-    method_view = _methods_view(ok, cards, methods, budget, plot_dir, folder) if len(methods) > 1 else None
+    method_view = _methods_view(ok, cards, methods, budget, plot_dir, folder, memo) if len(methods) > 1 else None
     metric_names = sorted({m for c in ok for ms in c["metrics"].values() for m in ms},
                           key=lambda m: (METRIC_ORDER.index(m) if m in METRIC_ORDER else len(METRIC_ORDER), m))
     tables = [{"image": img, "metrics": [m for m in metric_names if any(m in c["metrics"].get(img, {}) for c in ok)],
@@ -313,7 +353,7 @@ def _methods(configs):
     return sorted({c.get("method", "sslpv") for c in configs}, key=lambda m: (m != "sslpv", m))
 
 
-def _methods_view(ok, cards, methods, budget, plot_dir, folder):
+def _methods_view(ok, cards, methods, budget, plot_dir, folder, memo):
     """Per method: the best configuration under the budget; the error-vs-cost plots across methods;
     the images side by side (reference, then each method's best)."""
     best = {}
@@ -330,7 +370,7 @@ def _methods_view(ok, cards, methods, budget, plot_dir, folder):
     for image, metric in METHOD_METRICS:
         if any(plots.value(c, image, metric) is not None for c in ok):
             p = plot_dir / f"methods_{image}_{metric}_vs_cost.png"
-            plots.methods_error_vs_cost(ok, image, metric, p, budget)
+            _plot(memo, plots.methods_error_vs_cost, ok, image, metric, p, budget)
             plot_list.append({"src": _rel(p, folder), "title": f"{metric} vs cost, every method",
                               "caption": f"{metric} ({image}) of every configuration of every method against its "
                                          "frame time (left, ms on the recorded renderer) and its work count (right, "
@@ -410,7 +450,7 @@ def _reference(rdir, index, img_dir, exr_dir):
     return out
 
 
-def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
+def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes, memo):
     """PNGs, EXR and error maps of one image kind of one configuration."""
     v = {"ref_png": ref["png"].get(kind), "ref_exr": ref["exr"].get(kind)}
     if c["render_dir"] is None:
@@ -426,15 +466,31 @@ def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
     yref = ref["rgb"].get(kind)
     exposure = ref["exposure"].get(kind, images.auto_exposure(test))
     png = img_dir / f"{tag}.png"
-    images.write_png(png, test, exposure)
     v["test_png"], v["test_exr"] = f"img/{png.name}", f"exr/{_place(src, exr_dir / f'{tag}.exr').name}"
     if yref is None:
+        images.write_png(png, test, exposure)
         v["note"] = "no reference image to compare with"
         return v
     if yref.shape != test.shape:
+        images.write_png(png, test, exposure)
         v["note"] = f"size {test.shape[1]}x{test.shape[0]} differs from the reference's {yref.shape[1]}x{yref.shape[0]}"
         return v
     mask = ref["mask"] if ref["mask"] is not None and ref["mask"].shape == test.shape[:2] else None
+    # The three pictures are a pure function of these inputs (harness.report.memo): an unchanged
+    # configuration's are copied from the memo instead of drawn (FLIP's map dominates a report's time).
+    outs = [png, img_dir / f"{tag}_relerr.png"] + ([img_dir / f"{tag}_flip.png"] if flip_compute is not None else [])
+    key = memo.key("views", test.tobytes(), yref.tobytes(), b"" if mask is None else mask.tobytes(), exposure,
+                   RELERR, FLIPMAP, flip_compute is not None)
+    memo.produce(key, outs, lambda: _draw_views(c, test, yref, mask, exposure, tag, img_dir, flip_compute, notes))
+    v["relerr_png"] = f"img/{outs[1].name}"
+    if len(outs) > 2 and outs[2].is_file():
+        v["flip_png"] = f"img/{outs[2].name}"
+    return v
+
+
+def _draw_views(c, test, yref, mask, exposure, tag, img_dir, flip_compute, notes):
+    """Draw a configuration's PNG, its relative-error map and its FLIP map (see :func:`_views`)."""
+    images.write_png(img_dir / f"{tag}.png", test, exposure)
     sel = yref[mask] if mask is not None else yref.reshape(-1, 3)
     eps = RELERR["eps_fraction"] * max(float(np.mean(sel)) if sel.size else 0.0, 1e-12)
     rel = (np.abs(test - yref) / (np.abs(yref) + eps)).mean(axis=-1)
@@ -442,21 +498,26 @@ def _views(c, kind, ref, img_dir, exr_dir, flip_compute, notes):
         rel = np.where(mask, rel, 0.0)
     p = img_dir / f"{tag}_relerr.png"
     images.write_png_uint8(p, plots.false_colour(rel, RELERR["cmap"], RELERR["vmin"], RELERR["vmax"]))
-    v["relerr_png"] = f"img/{p.name}"
     if flip_compute is not None:
         try:
             fmap = flip_compute("flip", test, yref, mask).error_map
         except Exception as exc:  # noqa: BLE001 - one bad map must not stop the report
-            notes.append(f"FLIP map of configuration {c['id']} ({kind}) failed: {type(exc).__name__}: {exc}")
+            notes.append(f"FLIP map of configuration {c['id']} ({tag}) failed: {type(exc).__name__}: {exc}")
             fmap = None
         if fmap is not None:
             p = img_dir / f"{tag}_flip.png"
             images.write_png_uint8(p, plots.false_colour(fmap, FLIPMAP["cmap"], FLIPMAP["vmin"], FLIPMAP["vmax"]))
-            v["flip_png"] = f"img/{p.name}"
-    return v
 
 
 # ------------------------------------------------------------------ helpers
+
+def _plot(memo, draw, configs, *args):
+    """``draw(configs, *args)`` (a function of :mod:`harness.report.plots`; its output path among ``args``),
+    or its picture from the memo when the same configurations were drawn the same way before."""
+    outs = [a for a in args if isinstance(a, Path)]
+    key = memo.key("plot", draw.__name__, configs_digest(configs), [a.name if isinstance(a, Path) else a for a in args])
+    memo.produce(key, outs, lambda: draw(configs, *args))
+
 
 def _place(src, dst):
     """Hard-link ``src`` to ``dst`` (a copy when linking is not possible); returns ``dst``.
