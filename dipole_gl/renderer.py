@@ -47,6 +47,8 @@ Limits
   complete shadow map (SSLPV's frustum; a light inside gets a capped field of view).
 * Multiple scattering only (both papers leave out or separate single scattering).
 * A heterogeneous medium is seen through the material at the exit point (:mod:`dipole_gl.medium`).
+* No shader invocation runs more than :data:`dipole_gl.budget.ITERATION_BUDGET` loop iterations:
+  the gathers run in chunks (llvmpipe ends longer loops silently).
 """
 
 from __future__ import annotations
@@ -243,8 +245,8 @@ class DipoleRenderer:
                 irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
             out = self._targets.get("dipole_out", (W, H), 2)
             with timer.stage("gather"):
-                gathers.run_dense(self._program(("dense", kernel)), points, medium, gb, out.textures[0],
-                                  out.textures[1], scene, params.spacing * mat.mfp)
+                dispatches = gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb,
+                                               out.textures[0], out.textures[1], scene, params.spacing * mat.mfp)
             sub = gbuffer.read(out.textures[0], W, H)
             full = gbuffer.read(out.textures[1], W, H)
             gpos = gbuffer.read(gb.textures[0], W, H)
@@ -255,7 +257,7 @@ class DipoleRenderer:
             # far field: the lit samples; near field: the quadrature, counted for every covered pixel and light
             near = N_RAD * (N_PHI * L if kernel == "dirpole" else 1)
             work.update(gbuffer=W * H, irradiance=points.count * L, gather=int(mask.sum()) * (per_pixel + near))
-            info.update(samples=points.count, spacing=params.spacing * mat.mfp)
+            info.update(samples=points.count, spacing=params.spacing * mat.mfp, dispatches=dispatches)
             if debug:
                 vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
                 dbg.update(position=gpos[..., :3], normal=gbuffer.read(gb.textures[1], W, H)[..., :3],
@@ -269,7 +271,8 @@ class DipoleRenderer:
             with timer.stage("irradiance"):
                 irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
             with timer.stage("gather"):
-                gathers.run_vertex(self._program(("vertex", kernel)), points, vbufs, medium, scene)
+                dispatches = gathers.run_vertex(self._program(("vertex", kernel)), kernel, points, vbufs, medium,
+                                                scene)
             out = self._targets.get("dipole_vertex_out", (W, H), 2)
             with timer.stage("shading"):
                 gathers.run_display(self._program(("display",)), vbufs)
@@ -289,7 +292,7 @@ class DipoleRenderer:
                 gwork = pre.pairs
             work.update(irradiance=points.count * L, gather=gwork, shading=W * H + len(pre.display_index))
             info.update(vertices=len(pre.positions), pairs=pre.pairs, radius=pre.radius, edge=pre.edge,
-                        display_vertices=len(pre.display_index))
+                        display_vertices=len(pre.display_index), dispatches=dispatches)
             if debug:
                 dbg.update(flux=flux, b=vbufs.read_b(), b_display=vbufs.read_display(), pre=pre)
         return DipoleResult(
@@ -297,6 +300,27 @@ class DipoleRenderer:
             timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work, precompute_work=pre_work,
             gl_renderer=self.gl_renderer, warnings=list(self.warnings) + warnings + timer.warnings, info=info,
             debug=dbg)
+
+    @_current
+    def vertex_b(self, scene, kernel, pre):
+        """The vertex gather's ``B`` (V, 3) and the flux (L, V, 4) for a given precomputation ``pre``
+        (:class:`dipole_gl.vertex.VertexPrecomp`): shadow maps, irradiance and the gather of :meth:`render`."""
+        self._check_scene(scene)
+        _, medium = self._material(scene, kernel)
+        views, _, _, _ = rsm.light_views(scene)
+        prog = self._program(("rsm",))
+        s = DipoleParams().shadow_size
+        shadow_tex = rsm.render_shadow_atlas(self.ctx, prog, self._mesh_vao(scene, prog, "rsm"), self._targets, scene,
+                                             s, views, slot="dipole_shadow")
+        points = irradiance.PointBuffers(self.ctx, pre.positions, pre.normals, pre.areas, len(scene.lights))
+        vbufs = gathers.VertexBuffers(self.ctx, pre)
+        try:
+            irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
+            gathers.run_vertex(self._program(("vertex", kernel)), kernel, points, vbufs, medium, scene)
+            return vbufs.read_b().copy(), points.read_flux().copy()
+        finally:
+            points.release()
+            vbufs.release()
 
     @_current
     def gather_at(self, scene, kernel, params, positions, normals, visibility=None):
@@ -321,8 +345,8 @@ class DipoleRenderer:
         gbuffer.from_points(gb, positions, normals, visibility)
         irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, params.shadow_size)
         out = self._targets.get("dipole_points_out", (W, H), 2)
-        gathers.run_dense(self._program(("dense", kernel)), points, medium, gb, out.textures[0], out.textures[1],
-                          scene.with_resolution(W, H), params.spacing * mat.mfp)
+        gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb, out.textures[0],
+                          out.textures[1], scene.with_resolution(W, H), params.spacing * mat.mfp)
         return gbuffer.read(out.textures[0], W, H)[..., :3].copy(), points.read_flux()
 
     def _check_scene(self, scene):
