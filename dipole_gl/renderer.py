@@ -49,6 +49,8 @@ Limits
 * A heterogeneous medium is seen through the material at the exit point (:mod:`dipole_gl.medium`).
 * No shader invocation runs more than :data:`dipole_gl.budget.ITERATION_BUDGET` loop iterations:
   the gathers run in chunks (llvmpipe ends longer loops silently).
+* Every render checks a few points against the NumPy twin and refuses a result that disagrees
+  (:mod:`dipole_gl.check`; ``info["check"]`` records the cost).
 """
 
 from __future__ import annotations
@@ -62,8 +64,8 @@ import numpy as np
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
+from . import check, gbuffer, irradiance, shade
 from . import gather as gathers
-from . import gbuffer, irradiance, shade
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
 from .params import KERNELS, DipoleParams
@@ -252,6 +254,11 @@ class DipoleRenderer:
             gpos = gbuffer.read(gb.textures[0], W, H)
             mask = gpos[..., 3] > 0.5
             flux = points.read_flux()                                   # outside the timers
+            vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
+            gview = {"position": gpos[..., :3], "normal": gbuffer.read(gb.textures[1], W, H)[..., :3],
+                     "visibility": vis[..., :L], "mask": mask}
+            info["check"] = check.check_dense(kernel, scene, mat, entry.host, flux, gview, sub[..., :3],
+                                              params.spacing * mat.mfp)
             lit = (flux[..., 3] > 0).sum(axis=1)                        # lit samples per light
             per_pixel = int(lit.sum()) if kernel == "dirpole" else int(np.any(flux[..., 3] > 0, axis=0).sum())
             # far field: the lit samples; near field: the quadrature, counted for every covered pixel and light
@@ -259,10 +266,9 @@ class DipoleRenderer:
             work.update(gbuffer=W * H, irradiance=points.count * L, gather=int(mask.sum()) * (per_pixel + near))
             info.update(samples=points.count, spacing=params.spacing * mat.mfp, dispatches=dispatches)
             if debug:
-                vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
-                dbg.update(position=gpos[..., :3], normal=gbuffer.read(gb.textures[1], W, H)[..., :3],
+                dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
-                           samples=entry.host, visibility=vis[..., :L], spacing=params.spacing * mat.mfp)
+                           samples=entry.host, visibility=gview["visibility"], spacing=params.spacing * mat.mfp)
         else:
             pre, points, vbufs = self._vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():
@@ -291,10 +297,12 @@ class DipoleRenderer:
             else:
                 gwork = pre.pairs
             work.update(irradiance=points.count * L, gather=gwork, shading=W * H + len(pre.display_index))
+            b = vbufs.read_b()
+            info["check"] = check.check_vertex(kernel, scene, mat, pre, flux, b)
             info.update(vertices=len(pre.positions), pairs=pre.pairs, radius=pre.radius, edge=pre.edge,
                         display_vertices=len(pre.display_index), dispatches=dispatches)
             if debug:
-                dbg.update(flux=flux, b=vbufs.read_b(), b_display=vbufs.read_display(), pre=pre)
+                dbg.update(flux=flux, b=b, b_display=vbufs.read_display(), pre=pre)
         return DipoleResult(
             full=np.ascontiguousarray(full[..., :3]), subsurface=np.ascontiguousarray(sub[..., :3]), mask=mask,
             timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work, precompute_work=pre_work,
