@@ -50,7 +50,9 @@ Limits
 * No shader invocation runs more than :data:`dipole_gl.budget.ITERATION_BUDGET` loop iterations:
   the gathers run in chunks (llvmpipe ends longer loops silently).
 * Every render checks a few points against the NumPy twin and refuses a result that disagrees
-  (:mod:`dipole_gl.check`; ``info["check"]`` records the cost).
+  (:mod:`dipole_gl.check`; ``info["check"]`` records the cost); ``fit = coarsen`` sizes the
+  gather to its budget per scene (:mod:`dipole_gl.sizing`; ``info["spacing_used"]`` or
+  ``info["density_used"]``).
 """
 
 from __future__ import annotations
@@ -61,10 +63,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, gbuffer, irradiance, shade
+from . import check, gbuffer, irradiance, shade, sizing
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -192,11 +195,11 @@ class DipoleRenderer:
                             host=(pos, nrm, area))
         return c[key]
 
-    def _vertex_data(self, scene, mat, kernel, params):
+    def _vertex_data(self, scene, mat, kernel, density, range_):
         c = self._cache(scene)
-        key = ("vertex", kernel, params.density, params.range)
+        key = ("vertex", kernel, density, range_)
         if key not in c:
-            pre = vertex_precompute(scene, mat, kernel, params.density, params.range, float(scene.boundary.eta))
+            pre = vertex_precompute(scene, mat, kernel, density, range_, float(scene.boundary.eta))
             pts = irradiance.PointBuffers(self.ctx, pre.positions, pre.normals, pre.areas, len(scene.lights))
             c[key] = (pre, pts, gathers.VertexBuffers(self.ctx, pre))
         return c[key]
@@ -229,11 +232,12 @@ class DipoleRenderer:
                 "homogeneous": mat.homogeneous}
         dbg = {} if debug else None
         if params.gather == "dense":
-            entry = self._dense_points(scene, mat, params.spacing)
+            spacing = params.spacing
+            if params.fit == "coarsen":
+                spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing, W * H)
+            entry = self._dense_points(scene, mat, spacing)
             points = entry.value
             if W * H * points.count > MAX_FRAME_PAIRS:
-                from harness.errors import InputError
-
                 raise InputError("--spacing", "spacing", f"the dense gather would pair {W * H:,} pixels with "
                                  f"{points.count:,} surface samples (over {MAX_FRAME_PAIRS:,} per frame)",
                                  "raise --spacing or render a smaller image")
@@ -248,7 +252,7 @@ class DipoleRenderer:
             out = self._targets.get("dipole_out", (W, H), 2)
             with timer.stage("gather"):
                 dispatches = gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb,
-                                               out.textures[0], out.textures[1], scene, params.spacing * mat.mfp)
+                                               out.textures[0], out.textures[1], scene, spacing * mat.mfp)
             sub = gbuffer.read(out.textures[0], W, H)
             full = gbuffer.read(out.textures[1], W, H)
             gpos = gbuffer.read(gb.textures[0], W, H)
@@ -258,19 +262,19 @@ class DipoleRenderer:
             gview = {"position": gpos[..., :3], "normal": gbuffer.read(gb.textures[1], W, H)[..., :3],
                      "visibility": vis[..., :L], "mask": mask}
             info["check"] = check.check_dense(kernel, scene, mat, entry.host, flux, gview, sub[..., :3],
-                                              params.spacing * mat.mfp)
+                                              spacing * mat.mfp)
             lit = (flux[..., 3] > 0).sum(axis=1)                        # lit samples per light
             per_pixel = int(lit.sum()) if kernel == "dirpole" else int(np.any(flux[..., 3] > 0, axis=0).sum())
             # far field: the lit samples; near field: the quadrature, counted for every covered pixel and light
             near = N_RAD * (N_PHI * L if kernel == "dirpole" else 1)
             work.update(gbuffer=W * H, irradiance=points.count * L, gather=int(mask.sum()) * (per_pixel + near))
-            info.update(samples=points.count, spacing=params.spacing * mat.mfp, dispatches=dispatches)
+            info.update(samples=points.count, spacing=spacing * mat.mfp, spacing_used=spacing, dispatches=dispatches)
             if debug:
                 dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
-                           samples=entry.host, visibility=gview["visibility"], spacing=params.spacing * mat.mfp)
+                           samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
         else:
-            pre, points, vbufs = self._vertex_data(scene, mat, kernel, params)
+            pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():
                 pre_ms[k] = v
             pre_work.update(remesh=len(pre.positions), neighbourhoods=pre.pairs, display=len(pre.display_index))
@@ -283,7 +287,7 @@ class DipoleRenderer:
             with timer.stage("shading"):
                 gathers.run_display(self._program(("display",)), vbufs)
                 prog = self._program(("shade",))
-                shade.run(self.ctx, prog, self._mesh_vao(scene, prog, ("shade_vertex", kernel, params.density, params.range),
+                shade.run(self.ctx, prog, self._mesh_vao(scene, prog, ("shade_vertex", kernel, pre.edge, params.range),
                                                           vbufs.b_display), out, scene,
                           views, shadow_tex, s, centre, radius)
             full = gbuffer.read(out.textures[0], W, H)
@@ -300,7 +304,7 @@ class DipoleRenderer:
             b = vbufs.read_b()
             info["check"] = check.check_vertex(kernel, scene, mat, pre, flux, b)
             info.update(vertices=len(pre.positions), pairs=pre.pairs, radius=pre.radius, edge=pre.edge,
-                        display_vertices=len(pre.display_index), dispatches=dispatches)
+                        display_vertices=len(pre.display_index), density_used=pre.density, dispatches=dispatches)
             if debug:
                 dbg.update(flux=flux, b=b, b_display=vbufs.read_display(), pre=pre)
         return DipoleResult(
@@ -308,6 +312,20 @@ class DipoleRenderer:
             timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work, precompute_work=pre_work,
             gl_renderer=self.gl_renderer, warnings=list(self.warnings) + warnings + timer.warnings, info=info,
             debug=dbg)
+
+    def _fitted_vertex_data(self, scene, mat, kernel, params):
+        """:meth:`_vertex_data` at the density of ``params``, or with ``fit = coarsen`` at the density of
+        :func:`dipole_gl.sizing.vertex_density`, lowered by ``sizing.RETRY_FACTOR`` while the table is refused."""
+        if params.fit != "coarsen":
+            return self._vertex_data(scene, mat, kernel, params.density, params.range)
+        density = sizing.vertex_density(scene.mesh, mat.mfp, mat.diffusion_length, params.density, params.range)
+        for attempt in range(sizing.RETRIES + 1):
+            try:
+                return self._vertex_data(scene, mat, kernel, density, params.range)
+            except InputError as exc:
+                if exc.field != "range" or attempt == sizing.RETRIES:      # only the table's size is retried
+                    raise
+                density = sizing.check_density(round(density * sizing.RETRY_FACTOR, 6))
 
     @_current
     def vertex_b(self, scene, kernel, pre):
@@ -358,8 +376,6 @@ class DipoleRenderer:
         return gbuffer.read(out.textures[0], W, H)[..., :3].copy(), points.read_flux()
 
     def _check_scene(self, scene):
-        from harness.errors import InputError
-
         n = len(scene.lights)
         if n > MAX_LIGHTS:
             raise InputError(scene.path, "lights", f"{n} point lights, the dipole renderer supports at most "
