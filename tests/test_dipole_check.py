@@ -22,11 +22,6 @@ CONFIGS = [("dipole", DipoleParams(spacing=3.0)), ("dirpole", DipoleParams(spaci
            ("dirpole", DipoleParams(gather="vertex", density=0.25, range=2.0))]
 
 
-@pytest.fixture(scope="module")
-def renderer(dipole_renderer):
-    return dipole_renderer
-
-
 @pytest.fixture
 def wrong_twin(monkeypatch):
     """The twin's dense and vertex gathers off by 1 %."""
@@ -45,17 +40,17 @@ def test_compare():
 
 
 @pytest.mark.parametrize("kernel,params", CONFIGS, ids=lambda x: getattr(x, "gather", x))
-def test_render_records_its_check(renderer, kernel, params):
-    res = renderer.render(load_scene(SCENE).with_resolution(16, 16), kernel, params)
+def test_render_records_its_check(dipole_renderer, kernel, params):
+    res = dipole_renderer.render(load_scene(SCENE).with_resolution(16, 16), kernel, params)
     c = res.info["check"]
     print(f"{kernel} {params.gather}: {c}")
     assert c["points"] == check.CHECK_POINTS and c["max_rel_diff"] <= check.CHECK_RTOL and c["twin_evaluations"] > 0
 
 
 @pytest.mark.parametrize("kernel,params", CONFIGS, ids=lambda x: getattr(x, "gather", x))
-def test_a_wrong_result_is_refused(renderer, wrong_twin, kernel, params):
+def test_a_wrong_result_is_refused(dipole_renderer, wrong_twin, kernel, params):
     with pytest.raises(ResultRefused, match=f"{SCENE}: {kernel} {params.gather} gather: the GL result disagrees"):
-        renderer.render(load_scene(SCENE).with_resolution(16, 16), kernel, params)
+        dipole_renderer.render(load_scene(SCENE).with_resolution(16, 16), kernel, params)
 
 
 def test_render_command_exits_1_with_one_line(wrong_twin, tmp_path, capsys):

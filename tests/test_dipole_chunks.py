@@ -19,26 +19,13 @@ from dipole_gl.medium import scene_material
 from dipole_gl.params import DipoleParams
 from dipole_gl.sampling import N_PHI, radial_nodes, surface_samples
 from dipole_gl.vertex import VertexPrecomp
+from tests.test_dipole_gl import close as _close
 
 pytestmark = pytest.mark.gl
 
-RTOL = 1e-4
 #: The apple sphere at its committed small size: 46,080 samples at spacing 1, 81,920 at 0.8.
 SCENE = "apple_sphere"
 SPACING = {"dipole": 0.8, "dirpole": 1.0}
-
-
-@pytest.fixture(scope="module")
-def renderer(dipole_renderer):
-    return dipole_renderer
-
-
-def _close(gl, ref, label):
-    scale = float(np.abs(ref).max())
-    err = float(np.abs(gl - ref).max())
-    assert scale > 0, f"{label}: the twin's result is empty"
-    print(f"{label}: max|GL - twin| / max|twin| = {err / scale:.2e} (<= {RTOL})")
-    assert err <= RTOL * scale, f"{label}: {err:.3e} > {RTOL} * {scale:.3e}"
 
 
 def _lit(points, normals, light, cos_min=0.0):
@@ -52,7 +39,7 @@ def _unchunked_iterations(kernel, n, n_lights, near=0):
 
 
 @pytest.mark.parametrize("kernel", ["dipole", "dirpole"])
-def test_dense_gather_past_the_loop_limit(renderer, kernel):
+def test_dense_gather_past_the_loop_limit(dipole_renderer, kernel):
     """Six exit points on lit samples of the last fifth of the list, GL (chunked) against the twin.
 
     The points face the light at ``cos > 0.3``: at grazing light the float32 refraction of the
@@ -69,7 +56,7 @@ def test_dense_gather_past_the_loop_limit(renderer, kernel):
     tail = tail[_lit(pos[tail], nrm[tail], scene.lights[0], cos_min=0.3)]
     pick = np.random.default_rng(1).choice(tail, size=6, replace=False)
     xo, no = pos[pick][None], nrm[pick][None]                       # a 1 x 6 "image"
-    gl, flux_gl = renderer.gather_at(scene, kernel, params, xo, no)
+    gl, flux_gl = dipole_renderer.gather_at(scene, kernel, params, xo, no)
     flux, dirs = twin.irradiance(pos, nrm, area, scene.lights, scene.boundary.eta, flux_gl[..., 3])
     ref = twin.dense_gather(kernel, xo[0], no[0], scene.camera.origin, (pos, nrm), flux, dirs, mat,
                             scene.boundary.eta, params.spacing * mat.mfp, scene.lights, np.ones((6, L)))
@@ -100,7 +87,7 @@ def _long_rows(scene, mat, kernel, spacing, exits=4):
 
 
 @pytest.mark.parametrize("kernel", ["dipole", "dirpole"])
-def test_vertex_gather_past_the_loop_limit(renderer, kernel):
+def test_vertex_gather_past_the_loop_limit(dipole_renderer, kernel):
     """Four rows of 81,919 neighbours each (the apple sphere's samples at spacing 0.8), GL against the twin."""
     scene = small_scene(SCENE)
     mat = scene_material(scene)
@@ -108,7 +95,7 @@ def test_vertex_gather_past_the_loop_limit(renderer, kernel):
     L = len(scene.lights)
     longest = int(np.diff(pre.offsets).max())
     assert _unchunked_iterations(kernel, longest, L) > budget.LLVMPIPE_LOOP_LIMIT
-    b, flux_gl = renderer.vertex_b(scene, kernel, pre)
+    b, flux_gl = dipole_renderer.vertex_b(scene, kernel, pre)
     flux, dirs = twin.irradiance(pre.positions, pre.normals, pre.areas, scene.lights, scene.boundary.eta,
                                  flux_gl[..., 3])
     exits = np.arange(4)

@@ -26,7 +26,8 @@ def renderer(dipole_renderer):
     return dipole_renderer
 
 
-def _close(gl, ref, label):
+def close(gl, ref, label):
+    """Assert ``max |gl - ref| <= RTOL max |ref|`` (printing the figure)."""
     scale = float(np.abs(ref).max())
     err = float(np.abs(gl - ref).max())
     assert scale > 0, f"{label}: the twin's result is empty"
@@ -44,17 +45,17 @@ def test_gl_matches_twin(renderer, name, kernel):
     d = res.debug
     pos, nrm, area = d["samples"]
     flux, dirs = twin.irradiance(pos, nrm, area, scene.lights, scene.boundary.eta, d["flux"][..., 3])
-    _close(d["flux"][..., :3], flux, f"{name} {kernel} irradiance")
+    close(d["flux"][..., :3], flux, f"{name} {kernel} irradiance")
     m = res.mask
     ref = twin.dense_gather(kernel, d["position"][m], d["normal"][m], scene.camera.origin, (pos, nrm), flux, dirs,
                             mat, scene.boundary.eta, d["spacing"], scene.lights, d["visibility"][m])
-    _close(res.subsurface[m], ref, f"{name} {kernel} dense gather")
+    close(res.subsurface[m], ref, f"{name} {kernel} dense gather")
     res = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=0.25, range=2.0), debug=True)
     d, pre = res.debug, res.debug["pre"]
     flux, dirs = twin.irradiance(pre.positions, pre.normals, pre.areas, scene.lights, scene.boundary.eta,
                                  d["flux"][..., 3])
-    _close(d["b"], twin.vertex_gather(kernel, pre, flux, dirs, mat, scene.boundary.eta), f"{name} {kernel} vertex")
-    _close(d["b_display"], twin.display(pre, d["b"]), f"{name} {kernel} display")
+    close(d["b"], twin.vertex_gather(kernel, pre, flux, dirs, mat, scene.boundary.eta), f"{name} {kernel} vertex")
+    close(d["b_display"], twin.display(pre, d["b"]), f"{name} {kernel} display")
 
 
 def _slab_scene(alpha=0.9, sigma_tr=1.0, half=6.0, thick=1.0):
