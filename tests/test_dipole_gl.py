@@ -136,3 +136,20 @@ def test_vertex_converges_to_dense(renderer, kernel):
     # and gets close: measured relMSE 0.0035 (dipole) and 0.047 (dirpole, whose near-field spike the skipped
     # self vertex leaves out longest), energy 0.93 and 0.75 at (2, 3)
     assert errs[2] < {"dipole": 0.01, "dirpole": 0.1}[kernel] and energies[2] > {"dipole": 0.9, "dirpole": 0.7}[kernel]
+
+
+def test_fit_coarsen_records_the_setting_used(dipole_renderer, monkeypatch):
+    """``fit = coarsen`` in a render: the setting is kept where it fits and recorded; with the frame budget
+    lowered to 20,000 samples per pixel the spacing is coarsened until the samples fit (``dipole_gl.sizing``)."""
+    from dipole_gl import sizing
+
+    scene = load_scene("two_lights").with_resolution(16, 16)
+    dense = dipole_renderer.render(scene, "dipole", DipoleParams(fit="coarsen")).info
+    vertex = dipole_renderer.render(scene, "dipole", DipoleParams(gather="vertex", density=0.5, range=2.0,
+                                                                  fit="coarsen")).info
+    assert dense["spacing_used"] == 1.0 and dense["samples"] == 6144 and vertex["density_used"] == 0.5
+    monkeypatch.setattr(sizing, "MAX_FRAME_PAIRS", 16 * 16 * 20_000)
+    apple = load_scene("apple_sphere").with_resolution(16, 16)          # 46,080 samples at spacing 1
+    info = dipole_renderer.render(apple, "dipole", DipoleParams(fit="coarsen")).info
+    print(f"apple_sphere, 20,000 samples at most: spacing {info['spacing_used']}, {info['samples']} samples")
+    assert info["spacing_used"] > 1.0 and info["samples"] <= 20_000 and info["check"]["max_rel_diff"] <= 1e-3
