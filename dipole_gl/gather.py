@@ -11,11 +11,11 @@ import numpy as np
 
 from sslpv_gl import shaders as _sh
 
-from . import kernels
+from . import budget, kernels
 from .glsl import DIRS, MAX_LIGHTS
 from .sampling import N_PHI, NEAR_RADIUS, radial_nodes
 
-__all__ = ["build_dense", "build_vertex", "build_display", "MediumTextures", "set_boundary", "run_dense",
+__all__ = ["build_dense", "build_vertex", "build_display", "MediumTextures", "set_boundary", "dense_chunk_size", "run_dense",
            "VertexBuffers", "run_vertex", "run_display"]
 
 _BOUNDARY = ("u_A", "u_c_phi", "u_c_e", "u_c_phi_out", "u_A_dir")
@@ -33,7 +33,7 @@ def _medium_units(prog):
 
 def build_dense(ctx, kernel, warnings):
     prog = _sh.compute(ctx, "gather_dense.comp", _defines(kernel), dirs=DIRS)
-    names = ["u_count", "u_eta", "u_cam_pos", "u_size", "u_sp", "u_sa", "u_bbox_min", "u_bbox_size",
+    names = ["u_count", "u_first", "u_end", "u_last", "u_eta", "u_cam_pos", "u_size", "u_sp", "u_sa", "u_bbox_min", "u_bbox_size",
              "u_res", "u_gpos", "u_gnrm", "u_grefl", "u_gvis0", "u_rho", "u_n_rad", "u_rad_t", "u_rad_w",
              "u_light_pos", "u_light_I"]
     # the standard dipole needs neither the unreduced sigma_t nor the light directions
@@ -54,7 +54,7 @@ def build_dense(ctx, kernel, warnings):
 
 def build_vertex(ctx, kernel, warnings):
     prog = _sh.compute(ctx, "gather_vertex.comp", _defines(kernel), dirs=DIRS)
-    names = ["u_count"] + (["u_n_lights", "u_c_phi", "u_c_e", "u_c_phi_out", "u_A_dir", "u_sp", "u_sa", "u_st",
+    names = ["u_count", "u_k0", "u_k1"] + (["u_n_lights", "u_c_phi", "u_c_e", "u_c_phi_out", "u_A_dir", "u_sp", "u_sa", "u_st",
                             "u_bbox_min", "u_bbox_size", "u_res"] if kernel == "dirpole" else [])
     _sh.check_uniforms(prog, names, f"gather_vertex[{kernel}]", warnings)
     _medium_units(prog)
@@ -100,9 +100,19 @@ def set_boundary(prog, eta):
         _sh.set_uniform(prog, name, float(m[key]))
 
 
-def run_dense(prog, points, medium, gbuf, out_sub, out_full, scene, spacing):
+def dense_chunk_size(kernel, n_lights):
+    """Surface samples per dispatch of ``gather_dense.comp`` (:func:`dipole_gl.budget.dense_chunk`)."""
+    return budget.dense_chunk(kernel, n_lights, len(radial_nodes()[0]), N_PHI)
+
+
+def run_dense(prog, kernel, points, medium, gbuf, out_sub, out_full, scene, spacing):
     """The dense gather over ``points`` (sample spacing ``spacing``, scene units) for every G-buffer
-    pixel -> writes ``out_sub`` and ``out_full``."""
+    pixel -> writes ``out_sub`` and ``out_full``; returns the number of dispatches.
+
+    The far field runs in chunks of :func:`dense_chunk_size` samples, one dispatch each, the
+    partial sums accumulating per pixel in a storage buffer; the last dispatch adds the near
+    field and writes the images.
+    """
     cam = scene.camera
     points.bind()
     medium.use(prog)
@@ -124,7 +134,17 @@ def run_dense(prog, points, medium, gbuf, out_sub, out_full, scene, spacing):
     _sh.set_uniform(prog, "u_eta", float(scene.boundary.eta))
     _sh.set_uniform(prog, "u_cam_pos", tuple(map(float, cam.origin)))
     _sh.set_uniform(prog, "u_size", (cam.width, cam.height))
-    prog.run((cam.width + 7) // 8, (cam.height + 7) // 8)
+    accum = prog.ctx.buffer(reserve=cam.width * cam.height * 16)
+    accum.bind_to_storage_buffer(5)
+    pieces = budget.chunks(points.count, dense_chunk_size(kernel, len(scene.lights)))
+    for k, (first, end) in enumerate(pieces):
+        _sh.set_uniform(prog, "u_first", first)
+        _sh.set_uniform(prog, "u_end", end)
+        _sh.set_uniform(prog, "u_last", int(k == len(pieces) - 1))
+        prog.run((cam.width + 7) // 8, (cam.height + 7) // 8)
+        prog.ctx.memory_barrier()
+    accum.release()
+    return len(pieces)
 
 
 class VertexBuffers:
@@ -132,6 +152,7 @@ class VertexBuffers:
 
     def __init__(self, ctx, pre):
         self.count, self.display_count = len(pre.positions), len(pre.display_index)
+        self.longest_row = int(np.diff(pre.offsets).max()) if self.count else 0
         self.offsets = ctx.buffer(np.asarray(pre.offsets, dtype="i4").tobytes())
         nbr = pre.neighbours if len(pre.neighbours) else np.zeros(1, np.int32)
         self.nbrs = ctx.buffer(np.asarray(nbr, dtype="i4").tobytes())
@@ -158,8 +179,13 @@ class VertexBuffers:
             b.release()
 
 
-def run_vertex(prog, points, vbufs, medium, scene):
-    """``B`` per scattering vertex (``vbufs.b``) from the irradiance in ``points``."""
+def run_vertex(prog, kernel, points, vbufs, medium, scene):
+    """``B`` per scattering vertex (``vbufs.b``) from the irradiance in ``points``; returns the number of dispatches.
+
+    Each row of the neighbourhood table runs in chunks of :func:`dipole_gl.budget.vertex_chunk`
+    neighbours, one dispatch per chunk index (as many as the longest row needs), the partial
+    sums accumulating in ``vbufs.b``.
+    """
     points.bind()
     for i, b in zip((5, 6, 7, 8), (vbufs.offsets, vbufs.nbrs, vbufs.factors, vbufs.b)):
         b.bind_to_storage_buffer(i)
@@ -167,7 +193,13 @@ def run_vertex(prog, points, vbufs, medium, scene):
     set_boundary(prog, float(scene.boundary.eta))
     _sh.set_uniform(prog, "u_count", vbufs.count)
     _sh.set_uniform(prog, "u_n_lights", len(scene.lights))
-    prog.run((vbufs.count + 63) // 64)
+    pieces = budget.chunks(vbufs.longest_row, budget.vertex_chunk(kernel, len(scene.lights)))
+    for k0, k1 in pieces:
+        _sh.set_uniform(prog, "u_k0", k0)
+        _sh.set_uniform(prog, "u_k1", k1)
+        prog.run((vbufs.count + 63) // 64)
+        prog.ctx.memory_barrier()
+    return len(pieces)
 
 
 def run_display(prog, vbufs):

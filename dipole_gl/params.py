@@ -16,6 +16,9 @@ field              gather     meaning
                               (default 4)
 ``density``        vertex     scattering vertices per ``l'^2`` (default 1)
 ``shadow_size``    both       shadow-map resolution per light (default 1024)
+``fit``            both       ``refuse`` (default) or ``coarsen``: a setting over the
+                              gather's budget is refused, or coarsened just enough
+                              (:mod:`dipole_gl.sizing`)
 =================  =========  ==========================================================
 
 ``l'`` is the smallest reduced mean free path of the medium (largest ``sigma_t'`` over
@@ -31,10 +34,12 @@ from dataclasses import dataclass, field
 
 from harness.errors import InputError
 
-__all__ = ["DipoleParams", "GATHERS", "KERNELS", "GATHER_FIELDS", "DEFAULTS"]
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "GATHER_FIELDS", "DEFAULTS"]
 
 KERNELS = ("dipole", "dirpole")
 GATHERS = ("dense", "vertex")
+#: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
+FITS = ("refuse", "coarsen")
 #: gather -> the parameters that belong to it alone, with their defaults
 GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0}}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
@@ -57,6 +62,8 @@ class DipoleParams:
     density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
                                      "(default 1), in [0.01, 100]")
     shadow_size: int = _p(1024, "shadow-map resolution per light (visibility of the irradiance), in [16, 8192]")
+    fit: str | None = _p(None, "a spacing (dense) or vertex density (vertex) over the gather's budget: refuse "
+                               "(default) or coarsen it just enough to fit (the value used is in the result)")
 
     def __post_init__(self):
         def bad(name, problem, fix):
@@ -84,6 +91,10 @@ class DipoleParams:
                 bad(name, f"must be a number in {'[' if lo_closed else '('}{lo:g}, {hi:g}], got {v!r}",
                     "change the value")
             object.__setattr__(self, name, float(v))
+        if self.fit not in (None,) + FITS:
+            bad("fit", f"unknown value {self.fit!r}", "use one of: " + ", ".join(FITS))
+        if self.fit == "refuse":                       # the default: left out of the label
+            object.__setattr__(self, "fit", None)
         v = self.shadow_size
         if isinstance(v, bool) or not isinstance(v, int) or not 16 <= v <= 8192:
             bad("shadow_size", f"must be an integer in [16, 8192], got {v!r}", "change the value")

@@ -47,6 +47,12 @@ Limits
   complete shadow map (SSLPV's frustum; a light inside gets a capped field of view).
 * Multiple scattering only (both papers leave out or separate single scattering).
 * A heterogeneous medium is seen through the material at the exit point (:mod:`dipole_gl.medium`).
+* No shader invocation runs more than :data:`dipole_gl.budget.ITERATION_BUDGET` loop iterations:
+  the gathers run in chunks (llvmpipe ends longer loops silently).
+* Every render checks a few points against the NumPy twin and refuses a result that disagrees
+  (:mod:`dipole_gl.check`; ``info["check"]`` records the cost); ``fit = coarsen`` sizes the
+  gather to its budget per scene (:mod:`dipole_gl.sizing`; ``info["spacing_used"]`` or
+  ``info["density_used"]``).
 """
 
 from __future__ import annotations
@@ -57,11 +63,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
+from . import check, gbuffer, irradiance, shade, sizing
 from . import gather as gathers
-from . import gbuffer, irradiance, shade
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
 from .params import KERNELS, DipoleParams
@@ -188,11 +195,11 @@ class DipoleRenderer:
                             host=(pos, nrm, area))
         return c[key]
 
-    def _vertex_data(self, scene, mat, kernel, params):
+    def _vertex_data(self, scene, mat, kernel, density, range_):
         c = self._cache(scene)
-        key = ("vertex", kernel, params.density, params.range)
+        key = ("vertex", kernel, density, range_)
         if key not in c:
-            pre = vertex_precompute(scene, mat, kernel, params.density, params.range, float(scene.boundary.eta))
+            pre = vertex_precompute(scene, mat, kernel, density, range_, float(scene.boundary.eta))
             pts = irradiance.PointBuffers(self.ctx, pre.positions, pre.normals, pre.areas, len(scene.lights))
             c[key] = (pre, pts, gathers.VertexBuffers(self.ctx, pre))
         return c[key]
@@ -225,11 +232,12 @@ class DipoleRenderer:
                 "homogeneous": mat.homogeneous}
         dbg = {} if debug else None
         if params.gather == "dense":
-            entry = self._dense_points(scene, mat, params.spacing)
+            spacing = params.spacing
+            if params.fit == "coarsen":
+                spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing, W * H)
+            entry = self._dense_points(scene, mat, spacing)
             points = entry.value
             if W * H * points.count > MAX_FRAME_PAIRS:
-                from harness.errors import InputError
-
                 raise InputError("--spacing", "spacing", f"the dense gather would pair {W * H:,} pixels with "
                                  f"{points.count:,} surface samples (over {MAX_FRAME_PAIRS:,} per frame)",
                                  "raise --spacing or render a smaller image")
@@ -243,38 +251,43 @@ class DipoleRenderer:
                 irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
             out = self._targets.get("dipole_out", (W, H), 2)
             with timer.stage("gather"):
-                gathers.run_dense(self._program(("dense", kernel)), points, medium, gb, out.textures[0],
-                                  out.textures[1], scene, params.spacing * mat.mfp)
+                dispatches = gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb,
+                                               out.textures[0], out.textures[1], scene, spacing * mat.mfp)
             sub = gbuffer.read(out.textures[0], W, H)
             full = gbuffer.read(out.textures[1], W, H)
             gpos = gbuffer.read(gb.textures[0], W, H)
             mask = gpos[..., 3] > 0.5
             flux = points.read_flux()                                   # outside the timers
+            vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
+            gview = {"position": gpos[..., :3], "normal": gbuffer.read(gb.textures[1], W, H)[..., :3],
+                     "visibility": vis[..., :L], "mask": mask}
+            info["check"] = check.check_dense(kernel, scene, mat, entry.host, flux, gview, sub[..., :3],
+                                              spacing * mat.mfp)
             lit = (flux[..., 3] > 0).sum(axis=1)                        # lit samples per light
             per_pixel = int(lit.sum()) if kernel == "dirpole" else int(np.any(flux[..., 3] > 0, axis=0).sum())
             # far field: the lit samples; near field: the quadrature, counted for every covered pixel and light
             near = N_RAD * (N_PHI * L if kernel == "dirpole" else 1)
             work.update(gbuffer=W * H, irradiance=points.count * L, gather=int(mask.sum()) * (per_pixel + near))
-            info.update(samples=points.count, spacing=params.spacing * mat.mfp)
+            info.update(samples=points.count, spacing=spacing * mat.mfp, spacing_used=spacing, dispatches=dispatches)
             if debug:
-                vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
-                dbg.update(position=gpos[..., :3], normal=gbuffer.read(gb.textures[1], W, H)[..., :3],
+                dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
-                           samples=entry.host, visibility=vis[..., :L], spacing=params.spacing * mat.mfp)
+                           samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
         else:
-            pre, points, vbufs = self._vertex_data(scene, mat, kernel, params)
+            pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():
                 pre_ms[k] = v
             pre_work.update(remesh=len(pre.positions), neighbourhoods=pre.pairs, display=len(pre.display_index))
             with timer.stage("irradiance"):
                 irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
             with timer.stage("gather"):
-                gathers.run_vertex(self._program(("vertex", kernel)), points, vbufs, medium, scene)
+                dispatches = gathers.run_vertex(self._program(("vertex", kernel)), kernel, points, vbufs, medium,
+                                                scene)
             out = self._targets.get("dipole_vertex_out", (W, H), 2)
             with timer.stage("shading"):
                 gathers.run_display(self._program(("display",)), vbufs)
                 prog = self._program(("shade",))
-                shade.run(self.ctx, prog, self._mesh_vao(scene, prog, ("shade_vertex", kernel, params.density, params.range),
+                shade.run(self.ctx, prog, self._mesh_vao(scene, prog, ("shade_vertex", kernel, pre.edge, params.range),
                                                           vbufs.b_display), out, scene,
                           views, shadow_tex, s, centre, radius)
             full = gbuffer.read(out.textures[0], W, H)
@@ -288,15 +301,52 @@ class DipoleRenderer:
             else:
                 gwork = pre.pairs
             work.update(irradiance=points.count * L, gather=gwork, shading=W * H + len(pre.display_index))
+            b = vbufs.read_b()
+            info["check"] = check.check_vertex(kernel, scene, mat, pre, flux, b)
             info.update(vertices=len(pre.positions), pairs=pre.pairs, radius=pre.radius, edge=pre.edge,
-                        display_vertices=len(pre.display_index))
+                        display_vertices=len(pre.display_index), density_used=pre.density, dispatches=dispatches)
             if debug:
-                dbg.update(flux=flux, b=vbufs.read_b(), b_display=vbufs.read_display(), pre=pre)
+                dbg.update(flux=flux, b=b, b_display=vbufs.read_display(), pre=pre)
         return DipoleResult(
             full=np.ascontiguousarray(full[..., :3]), subsurface=np.ascontiguousarray(sub[..., :3]), mask=mask,
             timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work, precompute_work=pre_work,
             gl_renderer=self.gl_renderer, warnings=list(self.warnings) + warnings + timer.warnings, info=info,
             debug=dbg)
+
+    def _fitted_vertex_data(self, scene, mat, kernel, params):
+        """:meth:`_vertex_data` at the density of ``params``, or with ``fit = coarsen`` at the density of
+        :func:`dipole_gl.sizing.vertex_density`, lowered by ``sizing.RETRY_FACTOR`` while the table is refused."""
+        if params.fit != "coarsen":
+            return self._vertex_data(scene, mat, kernel, params.density, params.range)
+        density = sizing.vertex_density(scene.mesh, mat.mfp, mat.diffusion_length, params.density, params.range)
+        for attempt in range(sizing.RETRIES + 1):
+            try:
+                return self._vertex_data(scene, mat, kernel, density, params.range)
+            except InputError as exc:
+                if exc.field != "range" or attempt == sizing.RETRIES:      # only the table's size is retried
+                    raise
+                density = sizing.check_density(round(density * sizing.RETRY_FACTOR, 6))
+
+    @_current
+    def vertex_b(self, scene, kernel, pre):
+        """The vertex gather's ``B`` (V, 3) and the flux (L, V, 4) for a given precomputation ``pre``
+        (:class:`dipole_gl.vertex.VertexPrecomp`): shadow maps, irradiance and the gather of :meth:`render`."""
+        self._check_scene(scene)
+        _, medium = self._material(scene, kernel)
+        views, _, _, _ = rsm.light_views(scene)
+        prog = self._program(("rsm",))
+        s = DipoleParams().shadow_size
+        shadow_tex = rsm.render_shadow_atlas(self.ctx, prog, self._mesh_vao(scene, prog, "rsm"), self._targets, scene,
+                                             s, views, slot="dipole_shadow")
+        points = irradiance.PointBuffers(self.ctx, pre.positions, pre.normals, pre.areas, len(scene.lights))
+        vbufs = gathers.VertexBuffers(self.ctx, pre)
+        try:
+            irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
+            gathers.run_vertex(self._program(("vertex", kernel)), kernel, points, vbufs, medium, scene)
+            return vbufs.read_b().copy(), points.read_flux().copy()
+        finally:
+            points.release()
+            vbufs.release()
 
     @_current
     def gather_at(self, scene, kernel, params, positions, normals, visibility=None):
@@ -321,13 +371,11 @@ class DipoleRenderer:
         gbuffer.from_points(gb, positions, normals, visibility)
         irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, params.shadow_size)
         out = self._targets.get("dipole_points_out", (W, H), 2)
-        gathers.run_dense(self._program(("dense", kernel)), points, medium, gb, out.textures[0], out.textures[1],
-                          scene.with_resolution(W, H), params.spacing * mat.mfp)
+        gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb, out.textures[0],
+                          out.textures[1], scene.with_resolution(W, H), params.spacing * mat.mfp)
         return gbuffer.read(out.textures[0], W, H)[..., :3].copy(), points.read_flux()
 
     def _check_scene(self, scene):
-        from harness.errors import InputError
-
         n = len(scene.lights)
         if n > MAX_LIGHTS:
             raise InputError(scene.path, "lights", f"{n} point lights, the dipole renderer supports at most "

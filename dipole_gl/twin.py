@@ -142,17 +142,18 @@ def near_field(kernel, xo, no, m, rho, lights, vis, eta):
     return out
 
 
-def vertex_gather(kernel, pre, flux, dirs, mat, eta):
+def vertex_gather(kernel, pre, flux, dirs, mat, eta, vertices=None):
     """``B`` (V, 3) per scattering vertex: the neighbourhood sum (the exit Fresnel is applied per pixel).
 
     ``pre`` is :class:`dipole_gl.vertex.VertexPrecomp`; dipole: ``sum_j w_oj Phi_j`` with the
     precomputed ``w_oj = R_d(r_oj) / pi``; dirpole: ``sum_j sum_l S_d(x_j, w_l; x_o) Phi_jl``.
+    ``vertices`` (indices) restricts it to those exit vertices: then ``(len(vertices), 3)``.
     """
     V = len(pre.positions)
     out = np.zeros((V, 3))
     total = flux.sum(axis=0)
     m = exit_coefficients(mat, pre.positions, pre.normals, eta)
-    for o in range(V):
+    for o in (range(V) if vertices is None else vertices):
         lo, hi = pre.offsets[o], pre.offsets[o + 1]
         j = pre.neighbours[lo:hi]
         if kernel == "dipole":
@@ -164,7 +165,7 @@ def vertex_gather(kernel, pre, flux, dirs, mat, eta):
                 k = _pair_kernel(kernel, pre.positions[jl], pre.normals[jl], wi[jl], pre.positions[o:o + 1],
                                  pre.normals[o:o + 1], mo)[0]
                 out[o] += np.sum(k * fl[jl], axis=0)
-    return out
+    return out if vertices is None else out[np.asarray(vertices)]
 
 
 def display(pre, b):

@@ -64,6 +64,7 @@ class VertexPrecomp:
     radius: float                # the neighbourhood radius (scene units)
     edge: float                  # the target edge length
     times_ms: dict = field(default_factory=dict)
+    density: float | None = None  # the vertex density it was made for (vertices per l'^2)
 
     @property
     def pairs(self):
@@ -161,4 +162,5 @@ def precompute(scene, mat, kernel, density, range_, eta):
     t = time.perf_counter()
     idx, w = _display_weights(scene.mesh.vertices, pos, faces)
     times["display"] = (time.perf_counter() - t) * 1e3
-    return VertexPrecomp(pos, nrm, area, faces, offsets, nbr, factors, idx, w, float(radius), edge, times)
+    return VertexPrecomp(pos, nrm, area, faces, offsets, nbr, factors, idx, w, float(radius), edge, times,
+                         float(density))

@@ -21,3 +21,12 @@ class EnvironmentProblem(RuntimeError):
 
     The message is one line that names the component and how to install it.
     """
+
+
+class ResultRefused(RuntimeError):
+    """A renderer refused its own result: a self-check (e.g. the rivals' spot check against their
+    NumPy twin, :mod:`dipole_gl.check`) found it wrong.
+
+    The message is one line naming the check, the value and the tolerance; the command line
+    prints it and exits with status 1, a sweep records the configuration as failed.
+    """

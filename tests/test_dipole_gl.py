@@ -26,7 +26,8 @@ def renderer(dipole_renderer):
     return dipole_renderer
 
 
-def _close(gl, ref, label):
+def close(gl, ref, label):
+    """Assert ``max |gl - ref| <= RTOL max |ref|`` (printing the figure)."""
     scale = float(np.abs(ref).max())
     err = float(np.abs(gl - ref).max())
     assert scale > 0, f"{label}: the twin's result is empty"
@@ -44,17 +45,17 @@ def test_gl_matches_twin(renderer, name, kernel):
     d = res.debug
     pos, nrm, area = d["samples"]
     flux, dirs = twin.irradiance(pos, nrm, area, scene.lights, scene.boundary.eta, d["flux"][..., 3])
-    _close(d["flux"][..., :3], flux, f"{name} {kernel} irradiance")
+    close(d["flux"][..., :3], flux, f"{name} {kernel} irradiance")
     m = res.mask
     ref = twin.dense_gather(kernel, d["position"][m], d["normal"][m], scene.camera.origin, (pos, nrm), flux, dirs,
                             mat, scene.boundary.eta, d["spacing"], scene.lights, d["visibility"][m])
-    _close(res.subsurface[m], ref, f"{name} {kernel} dense gather")
+    close(res.subsurface[m], ref, f"{name} {kernel} dense gather")
     res = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=0.25, range=2.0), debug=True)
     d, pre = res.debug, res.debug["pre"]
     flux, dirs = twin.irradiance(pre.positions, pre.normals, pre.areas, scene.lights, scene.boundary.eta,
                                  d["flux"][..., 3])
-    _close(d["b"], twin.vertex_gather(kernel, pre, flux, dirs, mat, scene.boundary.eta), f"{name} {kernel} vertex")
-    _close(d["b_display"], twin.display(pre, d["b"]), f"{name} {kernel} display")
+    close(d["b"], twin.vertex_gather(kernel, pre, flux, dirs, mat, scene.boundary.eta), f"{name} {kernel} vertex")
+    close(d["b_display"], twin.display(pre, d["b"]), f"{name} {kernel} display")
 
 
 def _slab_scene(alpha=0.9, sigma_tr=1.0, half=6.0, thick=1.0):
@@ -135,3 +136,20 @@ def test_vertex_converges_to_dense(renderer, kernel):
     # and gets close: measured relMSE 0.0035 (dipole) and 0.047 (dirpole, whose near-field spike the skipped
     # self vertex leaves out longest), energy 0.93 and 0.75 at (2, 3)
     assert errs[2] < {"dipole": 0.01, "dirpole": 0.1}[kernel] and energies[2] > {"dipole": 0.9, "dirpole": 0.7}[kernel]
+
+
+def test_fit_coarsen_records_the_setting_used(dipole_renderer, monkeypatch):
+    """``fit = coarsen`` in a render: the setting is kept where it fits and recorded; with the frame budget
+    lowered to 20,000 samples per pixel the spacing is coarsened until the samples fit (``dipole_gl.sizing``)."""
+    from dipole_gl import sizing
+
+    scene = load_scene("two_lights").with_resolution(16, 16)
+    dense = dipole_renderer.render(scene, "dipole", DipoleParams(fit="coarsen")).info
+    vertex = dipole_renderer.render(scene, "dipole", DipoleParams(gather="vertex", density=0.5, range=2.0,
+                                                                  fit="coarsen")).info
+    assert dense["spacing_used"] == 1.0 and dense["samples"] == 6144 and vertex["density_used"] == 0.5
+    monkeypatch.setattr(sizing, "MAX_FRAME_PAIRS", 16 * 16 * 20_000)
+    apple = load_scene("apple_sphere").with_resolution(16, 16)          # 46,080 samples at spacing 1
+    info = dipole_renderer.render(apple, "dipole", DipoleParams(fit="coarsen")).info
+    print(f"apple_sphere, 20,000 samples at most: spacing {info['spacing_used']}, {info['samples']} samples")
+    assert info["spacing_used"] > 1.0 and info["samples"] <= 20_000 and info["check"]["max_rel_diff"] <= 1e-3

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from dipole_gl.params import DipoleParams
 from harness.errors import InputError
 from harness.methods import METHOD_NAMES, config_label, get_method, parse_methods
 from harness.methods.params import expand, params_from_cli, products
@@ -62,6 +63,7 @@ class TestRegistry:
         (["dipole"], {"gather": "atlas"}, "--gather: gather: unknown gather 'atlas'; use one of: dense, vertex"),
         (["dipole"], {"spacing": "0"}, r"--spacing: spacing: must be a number in \[0.05, 10\], got 0.0"),
         (["dipole"], {"density": "x"}, "--density: density: 'x' is not a number"),
+        (["dipole"], {"fit": "auto"}, "--fit: fit: unknown value 'auto'; use one of: refuse, coarsen"),
     ])
     def test_bad_parameters(self, methods, values, match):
         with pytest.raises(InputError, match=match):
@@ -72,6 +74,43 @@ class TestRegistry:
         assert params_from_cli("dirpole", {"gather": "vertex", "range": "2"}).range == 2.0
         with pytest.raises(InputError, match="takes one value here"):
             params_from_cli("dipole", {"spacing": "1,2"})
+
+
+class TestSizingRule:
+    """``fit = coarsen`` (``dipole_gl.sizing``): the chosen setting fits the budget on marble_sphere, and on a
+    scene where the default fits it is the default."""
+
+    def test_dense_spacing(self):
+        from dipole_gl.medium import scene_material
+        from dipole_gl.sampling import MAX_FRAME_PAIRS, MAX_SAMPLES, sample_count
+        from dipole_gl.sizing import dense_spacing
+        from harness.regression.accuracy import small_scene
+
+        for name, coarsened in (("marble_sphere", True), ("sphere_homogeneous", False)):
+            scene = small_scene(name)
+            mat = scene_material(scene)
+            pixels = scene.camera.width * scene.camera.height
+            default = DipoleParams().spacing
+            used = dense_spacing(scene.mesh, mat.mfp, default, pixels)
+            count = sample_count(scene.mesh, used * mat.mfp)
+            assert count <= MAX_SAMPLES and pixels * count <= MAX_FRAME_PAIRS, (name, used, count)
+            assert (used > default) == coarsened and (coarsened or used == default), (name, used)
+            if coarsened:                          # just enough: 1 % finer does not fit
+                assert pixels * sample_count(scene.mesh, 0.99 * used * mat.mfp) > MAX_FRAME_PAIRS, (name, used)
+
+    def test_vertex_density(self):
+        from dipole_gl.medium import scene_material
+        from dipole_gl.sizing import FIT_SHARE, estimated_pairs, mesh_area, vertex_density
+        from dipole_gl.vertex import MAX_PAIRS
+        from harness.regression.accuracy import small_scene
+
+        for name, coarsened in (("marble_sphere", True), ("sphere_homogeneous", False)):
+            scene = small_scene(name)
+            mat = scene_material(scene)
+            used = vertex_density(scene.mesh, mat.mfp, mat.diffusion_length, 0.5, 2.0)
+            est = estimated_pairs(mesh_area(scene.mesh), mat.mfp, mat.diffusion_length, used, 2.0)
+            assert est <= FIT_SHARE * MAX_PAIRS and (used < 0.5) == coarsened and (coarsened or used == 0.5), \
+                (name, used, est)
 
 
 class TestStore:
@@ -140,14 +179,19 @@ class TestBadInputOneLine:
                        "method dirpole needs a scattering medium")
         assert not (tmp_path / "s").exists()
 
+    def test_unknown_fit(self, tmp_path):
+        one_line_error(cli("render", "thin_ring", "--method", "dipole", "--fit", "shrink", "--out", str(tmp_path / "r")),
+                       "error: --fit: fit: unknown value 'shrink'; use one of: refuse, coarsen")
+        assert not (tmp_path / "r").exists()
+
     def test_nightly_matrix_of_another_method(self, tmp_path):
         from harness.regression.nightly import load_matrix
 
         m = tmp_path / "m.toml"
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4]\n'
                      '[[also]]\nmethod = "dipole"\ngather = ["vertex"]\ngrid = [8]\n')
-        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: density, gather, method, "
-                                             r"range, shadow_size, spacing"):
+        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: density, fit, gather, "
+                                             r"method, range, shadow_size, spacing"):
             load_matrix(m)
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
         with pytest.raises(InputError, match=r"also\[0\]\.method: unknown method 'atlas'"):

@@ -8,6 +8,10 @@
 //   far field  (1 - w) K: every surface sample (dipole_gl/sampling.py), the midpoint rule;
 //   near field w K: a polar quadrature on the tangent plane at x_o with the irradiance of x_o
 //   (radial Gauss-Legendre panels u_rad_t/u_rad_w on [0, rho], u_n_phi angles).
+// The far field runs in chunks, one dispatch each (samples u_first .. u_end - 1), so that no
+// invocation exceeds the loop budget of dipole_gl/budget.py (llvmpipe ends an invocation's loops
+// after 65,535 iterations in all, silently). The partial sums accumulate per pixel in Accum; the
+// last dispatch (u_last = 1) adds the near field and writes the images.
 // KERNEL_DIRPOLE and MAX_LIGHTS are #defined by the host. Mirrors dipole_gl/twin.py: dense_gather().
 layout(local_size_x = 8, local_size_y = 8) in;
 #include "sh.glsl"
@@ -20,6 +24,7 @@ layout(std430, binding = 1) readonly buffer Normals { vec4 nrm[]; };
 layout(std430, binding = 2) readonly buffer Flux    { vec4 flux[]; };
 layout(std430, binding = 3) readonly buffer Dirs    { vec4 w12[]; };
 layout(std430, binding = 4) readonly buffer Total   { vec4 total[]; };
+layout(std430, binding = 5) buffer Accum            { vec4 accum[]; };   // per pixel: the far field so far
 
 layout(binding = 3) uniform sampler2D u_gpos;     // xyz, w = coverage
 layout(binding = 4) uniform sampler2D u_gnrm;
@@ -29,7 +34,10 @@ layout(binding = 7) uniform sampler2D u_gvis1;    // lights 4-7
 layout(rgba32f, binding = 0) writeonly uniform image2D u_sub;
 layout(rgba32f, binding = 1) writeonly uniform image2D u_full;
 
-uniform int u_count;
+uniform int u_count;                 // surface samples (the stride of the per-light buffers)
+uniform int u_first;                 // this dispatch's samples: u_first .. u_end - 1
+uniform int u_end;
+uniform int u_last;                  // 1: the last dispatch (near field, Fresnel, images)
 uniform int u_n_lights;
 uniform float u_eta;
 uniform vec3 u_cam_pos;
@@ -59,16 +67,19 @@ void main()
     if (px.x >= u_size.x || px.y >= u_size.y) return;
     vec4 gp = texelFetch(u_gpos, px, 0);
     if (gp.w < 0.5) {
-        imageStore(u_sub, px, vec4(0.0));
-        imageStore(u_full, px, vec4(0.0));
+        if (u_last == 1) {
+            imageStore(u_sub, px, vec4(0.0));
+            imageStore(u_full, px, vec4(0.0));
+        }
         return;
     }
+    int pix = px.y * u_size.x + px.x;
     vec3 xo = gp.xyz;
     vec3 no = normalize(texelFetch(u_gnrm, px, 0).xyz);
     Coeffs c = coeffs_at(xo, no);
-    vec3 sum = vec3(0.0);
-    // ---- far field: every surface sample, weighted by 1 - w(r)
-    for (int i = 0; i < u_count; ++i) {
+    vec3 sum = u_first == 0 ? vec3(0.0) : accum[pix].rgb;
+    // ---- far field: this chunk's surface samples, weighted by 1 - w(r)
+    for (int i = u_first; i < u_end; ++i) {
         vec3 xi = pos_area[i].xyz;
         float far = smoothstep(0.0, u_rho, length(xi - xo));
         if (far == 0.0) continue;
@@ -82,6 +93,10 @@ void main()
         vec3 t = total[i].rgb;
         if (t != vec3(0.0)) sum += far * rd_dipole(length(xi - xo), c) * t;
 #endif
+    }
+    if (u_last == 0) {
+        accum[pix] = vec4(sum, 0.0);
+        return;
     }
     // ---- near field: w(r) K on the tangent plane at x_o, with the irradiance at x_o
     vec4 v0 = texelFetch(u_gvis0, px, 0), v1 = texelFetch(u_gvis1, px, 0);

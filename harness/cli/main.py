@@ -3,7 +3,9 @@
 Every subcommand takes ``--json`` and then prints exactly one JSON object on
 stdout: what it wrote (paths) and what it measured (figures). Bad input prints
 one line on stderr (``error: <file or setting>: <field>: <problem>; <fix>``)
-and exits with status 2; a missing system component (LLVM, OpenGL) exits 3.
+and exits with status 2; a missing system component (LLVM, OpenGL) exits 3; a
+result that a renderer's self-check refused (``harness.errors.ResultRefused``)
+prints one line and exits 1.
 """
 
 import argparse
@@ -12,7 +14,7 @@ import re
 import sys
 
 from harness.cli import baselines, calibrate, compare, export, nightly, reference, render, report, scenes, sweep
-from harness.errors import EnvironmentProblem, InputError
+from harness.errors import EnvironmentProblem, InputError, ResultRefused
 
 #: ``(name, module)`` of every command, in the order ``--help`` lists them.
 COMMANDS = [
@@ -107,6 +109,9 @@ def main(argv=None):
     except EnvironmentProblem as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3
+    except ResultRefused as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted; finished results are kept, run the same command again to resume", file=sys.stderr)
         return 130

@@ -2,7 +2,8 @@
 
 Both render with :class:`dipole_gl.renderer.DipoleRenderer`; their parameters are
 :class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex``, ``--spacing`` for dense,
-``--range`` and ``--density`` for vertex, ``--shadow-size``). A scene with a non-scattering
+``--range`` and ``--density`` for vertex, ``--shadow-size``, ``--fit refuse|coarsen``: a setting over
+the gather's budget refused or coarsened just enough, :mod:`dipole_gl.sizing`). A scene with a non-scattering
 voxel inside the mesh (albedo 0) is refused with one line (:mod:`dipole_gl.medium`).
 """
 
@@ -16,7 +17,7 @@ __all__ = ["DipoleMethod", "CLI_TO_FIELD"]
 
 #: command-line name -> DipoleParams field (shared by both kernels)
 CLI_TO_FIELD = {"gather": "gather", "spacing": "spacing", "range": "range", "density": "density",
-                "shadow_size": "shadow_size"}
+                "shadow_size": "shadow_size", "fit": "fit"}
 
 _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Hao & Varshney 2004) in GLSL",
            "dirpole": "directional dipole (Frisvad, Hachisuka & Kjeldsen 2014) in GLSL"}

@@ -1,0 +1,95 @@
+"""Every rival render checks itself: a few seeded random points recomputed by the NumPy twin.
+
+After each frame the renderer recomputes :data:`CHECK_POINTS` points of its own result with
+:mod:`dipole_gl.twin` (float64) and compares:
+
+* dense gather: covered pixels drawn with ``numpy.random.default_rng(CHECK_SEED)``; the twin
+  takes the G-buffer's exit point, normal and light visibility there, the surface samples and
+  the irradiance pass's visibility, and evaluates the whole gather (far field over every
+  sample, near field, exit Fresnel), :func:`dipole_gl.twin.dense_gather`;
+* vertex gather: scattering vertices that the display mesh reads (so they reach covered
+  pixels), drawn the same way; the twin evaluates their neighbourhood sums ``B``,
+  :func:`dipole_gl.twin.vertex_gather` (the raster pass that interpolates ``B`` is not checked).
+
+The result is refused (:class:`harness.errors.ResultRefused`, one line) when
+``|GL - twin| > CHECK_RTOL * scale`` at any checked point and colour, ``scale`` the largest
+``|twin|`` or ``|GL|`` of that colour over the checked points. GL runs in float32: on the suite
+the difference is at most 2e-5 of the scale (``tests/test_dipole_gl.py``); a gather that
+drops or repeats a chunk of its sum is off by far more than :data:`CHECK_RTOL`.
+
+Cost (recorded in ``info["check"]``: points, twin kernel evaluations, host ms): the twin's
+irradiance over every sample (dense) or vertex, plus per checked point the gather's kernel
+evaluations, i.e. ``CHECK_POINTS / pixels`` of the frame's gather work.
+
+Limits: a sample of points, not every pixel: an error confined to a few pixels can pass.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from harness.errors import ResultRefused
+
+from . import twin
+
+__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "compare"]
+
+#: Points recomputed by the twin per render.
+CHECK_POINTS = 8
+#: Seed of the points' draw (the same points every render of a scene and size).
+CHECK_SEED = 0
+#: The largest ``|GL - twin|``, relative to the checked points' scale, that is accepted.
+CHECK_RTOL = 1e-3
+
+
+def compare(gl, ref, what):
+    """Largest ``|gl - ref|`` relative to the per-colour scale; :class:`ResultRefused` beyond :data:`CHECK_RTOL`."""
+    gl, ref = np.asarray(gl, np.float64), np.asarray(ref, np.float64)
+    scale = np.maximum(np.abs(ref).max(axis=0), np.abs(gl).max(axis=0)) if len(ref) else np.zeros(3)
+    err = np.abs(gl - ref).max(axis=0) if len(ref) else np.zeros(3)
+    rel = float(np.max(np.where(scale > 0, err / np.where(scale > 0, scale, 1.0), 0.0)))
+    if not np.all(np.isfinite(gl)) or rel > CHECK_RTOL:
+        raise ResultRefused(f"{what}: the GL result disagrees with the NumPy twin at {len(ref)} checked points "
+                            f"(max |GL - twin| = {rel:.3g} of the largest value, tolerance {CHECK_RTOL:g}); "
+                            "the result is not kept")
+    return rel
+
+
+def _draw(n):
+    rng = np.random.default_rng(CHECK_SEED)
+    return np.sort(rng.choice(n, size=min(CHECK_POINTS, n), replace=False)) if n else np.zeros(0, np.int64)
+
+
+def check_dense(kernel, scene, mat, samples, flux_gl, gbuf, sub, spacing):
+    """Recompute :data:`CHECK_POINTS` covered pixels of the dense gather (``gbuf``: position, normal,
+    visibility, mask arrays (H, W, ...)) -> the record for ``info["check"]``."""
+    t = time.perf_counter()
+    eta = float(scene.boundary.eta)
+    pos, nrm, area = samples
+    flux, dirs = twin.irradiance(pos, nrm, area, scene.lights, eta, flux_gl[..., 3])
+    rows, cols = np.nonzero(gbuf["mask"])
+    pick = _draw(len(rows))
+    r, c = rows[pick], cols[pick]
+    ref = twin.dense_gather(kernel, gbuf["position"][r, c], gbuf["normal"][r, c], scene.camera.origin, (pos, nrm),
+                            flux, dirs, mat, eta, spacing, scene.lights, gbuf["visibility"][r, c], chunk=1)
+    rel = compare(sub[r, c], ref, f"{scene.name}: {kernel} dense gather")
+    lit = np.any(flux > 0.0, axis=2).sum() if kernel == "dirpole" else int(np.any(flux > 0.0, axis=(0, 2)).sum())
+    return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
+            "twin_evaluations": int(len(pick) * lit + len(pos) * len(scene.lights))}
+
+
+def check_vertex(kernel, scene, mat, pre, flux_gl, b):
+    """Recompute ``B`` at :data:`CHECK_POINTS` scattering vertices that the display mesh reads -> ``info["check"]``."""
+    t = time.perf_counter()
+    eta = float(scene.boundary.eta)
+    flux, dirs = twin.irradiance(pre.positions, pre.normals, pre.areas, scene.lights, eta, flux_gl[..., 3])
+    shown = np.unique(pre.display_index)
+    pick = shown[_draw(len(shown))]
+    ref = twin.vertex_gather(kernel, pre, flux, dirs, mat, eta, vertices=pick)
+    rel = compare(b[pick], ref, f"{scene.name}: {kernel} vertex gather")
+    rows = int(np.diff(pre.offsets)[pick].sum())
+    return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
+            "twin_evaluations": int(rows * (len(scene.lights) if kernel == "dirpole" else 1)
+                                    + len(pre.positions) * len(scene.lights))}
