@@ -320,4 +320,9 @@ MUTATIONS = (
              'outside_mask = np.asarray(material["inside"], dtype=bool)',
              ("tests/test_gl_vs_twin_modes.py::TestModesEndToEnd::test_accumulation_and_shading",),
              "diagnostics: the share of accumulated energy 'outside' summed over the cells inside the mesh"),
+    Mutation("compare_every_pixel", "metric", "harness/cli/compare.py",
+             "    mask = comparison_mask(coverage)\n", "    mask = np.ones_like(comparison_mask(coverage))\n",
+             ("tests/test_compare.py::test_render_then_compare_equals_the_sweep",),
+             "compare: every pixel against a reference with its coverage beside it (the sweep compares only "
+             "the fully covered ones)"),
 )
