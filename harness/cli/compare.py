@@ -1,5 +1,12 @@
-"""``sslpv-harness compare REF TEST [--mask M] [--json]``: every metric of one test
+"""``sslpv-harness compare REF TEST [--mask M | --all-pixels] [--json]``: every metric of one test
 EXR against one reference EXR.
+
+Which pixels: those of ``--mask M`` when given; else, when the reference's coverage is
+beside it (its ``mask`` layer, or the ``mask.exr`` of a reference folder:
+:func:`harness.runs.sweep.reference_coverage`), the fully covered pixels
+(:func:`harness.metrics.coverage.comparison_mask`), the same mask as a sweep's, so one
+render compared here gives the numbers a sweep records for it; else, or with
+``--all-pixels``, every pixel. The result says which rule chose the pixels and how many.
 
 When the reference is a reference render's ``subsurface.exr`` with
 ``half_a.exr`` and ``half_b.exr`` beside it (see ``docs/conventions.md``), each
@@ -16,6 +23,7 @@ import numpy as np
 from harness.errors import InputError
 from harness.io.images import read_exr
 from harness.metrics import compare_images
+from harness.metrics.coverage import FULL_COVERAGE, comparison_mask
 
 #: Reference file names whose folder's half_a/half_b are halves of that image.
 _HALVES_BELONG_TO = ("subsurface.exr",)
@@ -77,7 +85,7 @@ def _jsonable(v):
     return v
 
 
-def run_compare(ref_path, test_path, mask_path=None, as_json=False):
+def run_compare(ref_path, test_path, mask_path=None, as_json=False, all_pixels=False):
     """Compare a test EXR with a reference EXR by every registered metric.
 
     Parameters
@@ -85,7 +93,10 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
     ref_path, test_path : str or Path
         EXR files with R, G, B channels, read with :func:`harness.io.images.read_exr`.
     mask_path : str or Path, optional
-        A mask (see :func:`read_mask`); all pixels when ``None``.
+        A mask (see :func:`read_mask`). When ``None``: the fully covered pixels of the
+        reference's coverage where it has one (as a sweep), else every pixel.
+    all_pixels : bool, default False
+        Every pixel, even where the reference's coverage is beside it; not with ``mask_path``.
     as_json : bool, default False
         When True the result holds only JSON types (lists, not tuples; NaN as
         None), ready for ``json.dumps``. The numbers are the same either way.
@@ -93,9 +104,14 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
     Returns
     -------
     dict
-        ``{"ref": str, "test": str, "mask": str | None, "noise_floor_from":
-        [half_a, half_b] | None, "metrics": {name: {"value", "per_channel",
-        "noise_floor", "params", "higher_is_better", "target"}}}``.
+        ``{"ref": str, "test": str, "mask": str | None, "mask_rule": str,
+        "mask_threshold": float | None, "mask_pixels": int, "pixels": int,
+        "noise_floor_from": [half_a, half_b] | None, "metrics": {name: {"value",
+        "per_channel", "noise_floor", "params", "higher_is_better", "target"}}}``.
+        ``mask_rule`` is ``"file"`` (``mask`` is the file), ``"full_coverage"`` (``mask``
+        names the coverage, ``mask_threshold`` the coverage a pixel reaches) or
+        ``"all_pixels"`` (asked for) or ``"no_coverage"`` (the reference has none beside it;
+        ``mask`` is None for both); ``mask_pixels`` of ``pixels`` were compared.
 
     Raises
     ------
@@ -104,13 +120,14 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
         the file), or images (or a mask) of different sizes, naming both files.
     """
     ref_path, test_path = Path(ref_path), Path(test_path)
-    ref = read_exr(ref_path)["rgb"]
+    ref_layers = read_exr(ref_path)
+    ref = ref_layers["rgb"]
     test = read_exr(test_path)["rgb"]
     if test.shape != ref.shape:
         raise InputError(test_path, "size", f"is {test.shape[1]}x{test.shape[0]} but the reference "
                          f"{ref_path} is {ref.shape[1]}x{ref.shape[0]}",
                          "render the test at the reference's size")
-    mask = None if mask_path is None else read_mask(mask_path, ref.shape[:2])
+    mask, rule = _choose_mask(ref_path, ref_layers, mask_path, all_pixels)
 
     halves = None
     if ref_path.name in _HALVES_BELONG_TO:
@@ -119,11 +136,15 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
             halves = (read_exr(pa, expect_shape=ref.shape[:2])["rgb"],
                       read_exr(pb, expect_shape=ref.shape[:2])["rgb"])
             halves_from = [str(pa), str(pb)]
-    rows = compare_images(test, ref, mask, *(halves or (None, None)))
+    rows = compare_images(test, ref, mask[0], *(halves or (None, None)))
     result = {
         "ref": str(ref_path),
         "test": str(test_path),
-        "mask": None if mask_path is None else str(mask_path),
+        "mask": mask[1],
+        "mask_rule": rule,
+        "mask_threshold": FULL_COVERAGE if rule == "full_coverage" else None,
+        "mask_pixels": int(ref.shape[0] * ref.shape[1] if mask[0] is None else mask[0].sum()),
+        "pixels": int(ref.shape[0] * ref.shape[1]),
         "noise_floor_from": halves_from if halves else None,
         "metrics": {r["metric"]: {k: r[k] for k in ("value", "per_channel", "noise_floor", "params",
                                                      "higher_is_better", "target")}
@@ -133,6 +154,41 @@ def run_compare(ref_path, test_path, mask_path=None, as_json=False):
         result = _jsonable(result)
         json.dumps(result, allow_nan=False)  # guaranteed serialisable
     return result
+
+
+def _choose_mask(ref_path, ref_layers, mask_path, all_pixels):
+    """``((mask or None, source or None), rule)``: which pixels a comparison uses (see the module)."""
+    shape = ref_layers["rgb"].shape[:2]
+    if mask_path is not None:
+        if all_pixels:
+            raise InputError("--all-pixels", "all_pixels", "cannot be combined with --mask",
+                             "give one of them")
+        return (read_mask(mask_path, shape), str(mask_path)), "file"
+    if all_pixels:
+        return (None, None), "all_pixels"
+    from harness.runs.sweep import reference_coverage
+
+    coverage, source = reference_coverage(ref_path, ref_layers, shape)
+    if coverage is None:
+        return (None, None), "no_coverage"
+    mask = comparison_mask(coverage)
+    if not mask.any():
+        raise InputError(source, "mask", f"the reference's coverage reaches {FULL_COVERAGE:g} on no pixel",
+                         "give --mask M, or --all-pixels")
+    return (mask, source), "full_coverage"
+
+
+def mask_line(result):
+    """One line saying which pixels a :func:`run_compare` result used, and how many."""
+    n, of = result["mask_pixels"], result["pixels"]
+    if result["mask_rule"] == "file":
+        return f"mask {result['mask']}: {n} of {of} pixels"
+    if result["mask_rule"] == "full_coverage":
+        return (f"mask {result['mask']}: coverage >= {result['mask_threshold']:g} (fully covered, as a sweep "
+                f"compares): {n} of {of} pixels; --all-pixels for every pixel")
+    why = ("--all-pixels" if result["mask_rule"] == "all_pixels"
+           else "the reference has no coverage beside it: no mask layer, no mask.exr")
+    return f"mask: none, all {of} pixels ({why})"
 
 
 def _fmt(v):
@@ -146,10 +202,7 @@ def format_table(result):
     from rich.console import Console
     from rich.table import Table
 
-    title = f"test {result['test']}\nvs ref {result['ref']}"
-    if result.get("mask"):
-        title += f"\nmask {result['mask']}"
-    table = Table(title=title, title_justify="left")
+    table = Table()
     for col, justify in (("metric", "left"), ("value", "right"), ("R", "right"),
                          ("G", "right"), ("B", "right"), ("noise floor", "right"),
                          ("ideal", "right")):
@@ -161,7 +214,9 @@ def format_table(result):
                       ideal)
     buf = io.StringIO()
     Console(file=buf, width=110, color_system=None, force_terminal=False).print(table)
-    lines = ["\n".join(line.rstrip() for line in buf.getvalue().rstrip().splitlines())]
+    # The heading is printed apart from the table: rich would wrap a long path inside its title.
+    lines = [f"ref  {result['ref']}", f"test {result['test']}", mask_line(result),
+             "\n".join(line.rstrip() for line in buf.getvalue().rstrip().splitlines())]
     notes = []
     for name, m in result["metrics"].items():
         keys = {"relmse": ("eps",), "smape": ("eps",), "si_relmse": ("eps", "scales"),
@@ -192,9 +247,13 @@ HELP = "print every metric between two EXR files"
 def configure(sp):
     sp.add_argument("ref", type=Path, help="reference EXR")
     sp.add_argument("test", type=Path, help="test EXR")
-    sp.add_argument("--mask", type=Path, help="EXR whose R channel > 0.5 marks the pixels to compare")
+    sp.add_argument("--mask", type=Path, help="mask of the pixels to compare (.exr: R > 0.5; .png; .npy); default: "
+                    "the pixels the reference covers fully when its coverage is beside it (its mask layer or "
+                    "mask.exr), as a sweep compares, else every pixel")
+    sp.add_argument("--all-pixels", dest="all_pixels", action="store_true",
+                    help="compare every pixel, even where the reference's coverage is beside it")
 
 
 def run(args):
-    result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json)
+    result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json, all_pixels=args.all_pixels)
     return result, None if args.json else format_table(result), 0

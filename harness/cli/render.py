@@ -1,4 +1,5 @@
-"""``sslpv-harness render SCENE [--method M] --grid N --steps K ... --out DIR``: one render of one method."""
+"""``sslpv-harness render SCENE [--method M] [--size WxH|small] --grid N --steps K ... --out DIR``: one render
+of one method."""
 
 from pathlib import Path
 
@@ -10,6 +11,8 @@ HELP = "render a scene with one method (default: the SSLPV GLSL renderer)"
 def configure(sp):
     sp.add_argument("scene", help="suite scene name or path")
     sp.add_argument("--out", type=Path, required=True, help="output folder")
+    sp.add_argument("--size", help="image size WxH, or small (the scene at its committed small size, the size of "
+                    "its committed reference; as `sweep --size small`); default: the scene's")
     add_sslpv_args(sp, multi=False)
     add_method_args(sp, multi=False)
 
@@ -18,7 +21,9 @@ def run(args):
     from harness.methods import parse_methods
     from harness.methods.params import all_cli_names, params_from_cli
     from harness.runs.render import run_render
+    from harness.runs.sweep import parse_size
 
+    size = parse_size(args.size)                 # a bad value is refused before anything is rendered
     methods = parse_methods(args.method)
     if len(methods) != 1:
         from harness.errors import InputError
@@ -26,4 +31,5 @@ def run(args):
         raise InputError("--method", "method", f"render takes one method, got {len(methods)}", "use 'sweep' for lists")
     values = vars(args)
     params = params_from_cli(methods[0], {k: values.get(k) for k in all_cli_names()})
-    return run_render(args.scene, args.out, params, as_json=args.json, method=methods[0]), None, 0
+    return run_render(args.scene, args.out, params, as_json=args.json, method=methods[0],
+                      size=size), None, 0

@@ -14,7 +14,8 @@ the fraction of 4 x 4 stratified camera rays per pixel that hit the mesh,
 
 :func:`comparison_mask` is the one place that decides this; the sweep's
 :func:`harness.runs.sweep.load_reference` (and through it the sweep, the nightly,
-the accuracy tests, the verdicts and the calibration) and the report use it.
+the accuracy tests, the verdicts and the calibration), ``sslpv-harness compare`` and the
+report use it.
 """
 
 import numpy as np

@@ -6,7 +6,8 @@ Writes, atomically (the folder appears complete or not at all):
 * ``subsurface.exr`` -- the SSLPV part, with the coverage ``mask`` as an extra layer;
 * ``preview.png`` -- the full image, auto exposure;
 * ``render.json`` -- the method and every parameter, scene name and content hash, GL renderer,
-  per-stage GPU timings (ms), warnings and image size; for a method other than SSLPV also
+  per-stage GPU timings (ms), warnings and image size (``width``, ``height``, and ``size`` as asked:
+  ``"small"``, ``[W, H]`` or None for the scene's own); for a method other than SSLPV also
   its precomputation (``precompute``: step -> ms and work) and work counts per stage (``work``).
 """
 
@@ -18,6 +19,7 @@ from pathlib import Path
 from harness.io.atomic import atomic_dir
 from harness.io.outputs import check_replaceable, check_writable
 from harness.io.images import auto_exposure, write_exr, write_png
+from harness.reference.committed import sized_scene
 from harness.scene import load_scene
 
 from sslpv_gl.params import SSLPVParams
@@ -40,20 +42,24 @@ def write_render_dir(out_dir, full, subsurface, mask, info, preview, exposure):
 
 
 def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, as_json=False, renderer=None,
-               method="sslpv"):
+               method="sslpv", size=None):
     """Render a scene with ``method`` and write the output folder; returns the ``render.json`` content.
+
+    ``size`` is the image size as a sweep takes it (:func:`harness.reference.committed.sized_scene`):
+    ``[W, H]``, ``"small"`` (the committed small size, that of the scene's committed reference) or
+    None (the scene's own).
 
     ``renderer`` (an :class:`~sslpv_gl.renderer.SSLPVRenderer`) may be passed to
     reuse a context; ``as_json`` only affects how the CLI prints the result.
     """
     from sslpv_gl.renderer import SSLPVRenderer
 
-    scene = load_scene(scene_name_or_path)
+    scene = sized_scene(load_scene(scene_name_or_path), size)
     out_dir = Path(out_dir) if out_dir is not None else Path("renders") / scene.name
     check_replaceable(out_dir)                 # refused before the render, not after it
     check_writable(out_dir, "--out")
     if method != "sslpv":
-        return _run_method_render(scene, out_dir, params, method)
+        return _run_method_render(scene, out_dir, params, method, size)
     params = params or SSLPVParams()
     result = (renderer or SSLPVRenderer()).render(scene, params)
     exposure = auto_exposure(result.full)
@@ -66,6 +72,7 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
         "timings_ms": {k: float(v) for k, v in result.timings_ms.items()},
         "width": scene.camera.width,
         "height": scene.camera.height,
+        "size": size,
         "covered_pixels": int(result.mask.sum()),
         "preview_exposure": exposure,
         "warnings": list(result.warnings),
@@ -77,7 +84,7 @@ def run_render(scene_name_or_path, out_dir, params: SSLPVParams | None = None, a
     return info
 
 
-def _run_method_render(scene, out_dir, params, method):
+def _run_method_render(scene, out_dir, params, method, size):
     """``run_render`` for a method other than SSLPV (``harness.methods``)."""
     from harness.methods import get_method
 
@@ -93,7 +100,7 @@ def _run_method_render(scene, out_dir, params, method):
         "precompute": {k: {"ms": res.precompute_ms.get(k), "work": res.precompute_work.get(k)}
                        for k in sorted(set(res.precompute_ms) | set(res.precompute_work))},
         "work": {k: int(v) for k, v in res.work.items()}, "work_units": {k: m.work_units.get(k) for k in res.work},
-        "info": res.info, "width": scene.camera.width, "height": scene.camera.height,
+        "info": res.info, "width": scene.camera.width, "height": scene.camera.height, "size": size,
         "covered_pixels": int(res.mask.sum()), "preview_exposure": exposure, "warnings": list(res.warnings),
         "mesh_repair": scene.mesh.repair,
     }

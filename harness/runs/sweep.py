@@ -234,6 +234,26 @@ def _params_from_args(args):
 
 # --------------------------------------------------------------------------- references
 
+def reference_coverage(ref_path, layers, shape):
+    """``(coverage, source)``: the coverage of the reference image ``ref_path``, or ``(None, None)``.
+
+    ``layers`` is ``ref_path`` as :func:`harness.io.images.read_exr` read it. The coverage is its
+    ``mask`` layer, else the ``mask.exr`` beside it (a reference folder's); ``source`` names
+    which (``"FILE[mask]"`` or the ``mask.exr`` path). Its
+    :func:`~harness.metrics.coverage.comparison_mask` is the comparison mask of
+    :func:`load_reference` and of ``sslpv-harness compare``.
+    """
+    from harness.io.images import read_exr
+
+    ref_path = Path(ref_path)
+    if layers.get("mask") is not None:
+        return np.asarray(layers["mask"], dtype=np.float32), f"{ref_path}[mask]"
+    beside = ref_path.with_name("mask.exr")
+    if beside.is_file():
+        return read_exr(beside, expect_shape=shape)["rgb"][..., 0], str(beside)
+    return None, None
+
+
 def load_reference(ref_dir, shape):
     """Arrays the workers compare against: subsurface, full, halves, per-pixel standard errors and the mask.
 
@@ -251,9 +271,7 @@ def load_reference(ref_dir, shape):
     ref_dir = Path(ref_dir)
     sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
     full = read_exr(ref_dir / "full.exr", expect_shape=shape)
-    mask_layer = sub.get("mask")
-    if mask_layer is None and (ref_dir / "mask.exr").is_file():
-        mask_layer = read_exr(ref_dir / "mask.exr", expect_shape=shape)["rgb"][..., 0]
+    mask_layer, _ = reference_coverage(ref_dir / "subsurface.exr", sub, shape)
     if mask_layer is None:
         raise InputError(ref_dir, "mask", "the reference has no object mask", "re-render the reference")
     meta = ref_dir / "reference.json"

@@ -393,4 +393,9 @@ MUTATIONS = (
              "limit = min(MAX_SAMPLES, MAX_FRAME_PAIRS // max(int(pixels), 1))", "limit = MAX_SAMPLES",
              ("tests/test_methods.py::TestSizingRule",),
              "the dense sizing rule forgets the per-frame pair budget (marble_sphere keeps a spacing that is refused)"),
+    Mutation("compare_every_pixel", "metric", "harness/cli/compare.py",
+             "    mask = comparison_mask(coverage)\n", "    mask = np.ones_like(comparison_mask(coverage))\n",
+             ("tests/test_compare.py::test_render_then_compare_equals_the_sweep",),
+             "compare: every pixel against a reference with its coverage beside it (the sweep compares only "
+             "the fully covered ones)"),
 )
