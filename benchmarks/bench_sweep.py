@@ -38,7 +38,7 @@ def one(scenes, params, size, out, group, workers, lp_threads):
 
     cfg = SweepConfig(scenes=scenes, params=params, out=str(out), size=size)
     t0 = time.perf_counter()
-    summary = run_sweep(cfg, workers=workers, progress=False, group=group, lp_threads=lp_threads)
+    summary = run_sweep(cfg, workers=workers, progress=False, group=group, lp_threads=lp_threads, cache=False)
     summary["bench_wall_s"] = time.perf_counter() - t0
     if summary["failed"]:
         raise SystemExit(f"{summary['failed']} configurations failed in {out}")

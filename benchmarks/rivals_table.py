@@ -69,7 +69,7 @@ def main():
             run_id = st.runs()[-1]["id"]
     else:
         cfg = SweepConfig(scenes=scenes, params=PRODUCTS, out=str(args.out), size="small")
-        summary = run_sweep(cfg, workers=args.workers, progress=False)
+        summary = run_sweep(cfg, workers=args.workers, progress=False, cache=False)   # timed: always render
         print(f"sweep: {summary['configurations']} configurations, {summary['ok']} ok, {summary['failed']} failed, "
               f"{summary['wall_s']} s")
         run_id = summary["run_id"]

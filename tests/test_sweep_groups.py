@@ -130,7 +130,7 @@ def test_mixed_steps_sweep_grouped_equals_per_configuration(tmp_path):
     for group in (True, False):
         cfg = SweepConfig(scenes=["thin_ring"], params=dict(params), out=str(tmp_path / f"g{int(group)}"),
                           size=[64, 64])
-        summary = run_sweep(cfg, workers=2, progress=False, group=group)
+        summary = run_sweep(cfg, workers=2, progress=False, group=group, cache=False)   # both render
         assert summary["ok"] == 4 and summary["failed"] == 0 and summary["status"] == "finished"
         assert summary["groups"] == (3 if group else 4)
         with Store(summary["store"]) as st:
