@@ -40,6 +40,7 @@ least recently used entries after each sweep.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -107,9 +108,16 @@ def _calibration_sha(params):
     return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "missing"
 
 
+@functools.lru_cache(maxsize=None)
+def _code(method):
+    """The method's code fingerprint, once per process: hashing its modules costs about 0.1 s, and a
+    sweep asks for it once per configuration (the files do not change while a sweep runs)."""
+    return method_fingerprint(method)["code"]
+
+
 def result_key(method, scene_hash, params, ref_hash, gl_renderer):
     """The cache key of one configuration (see the module docstring); ``params`` is its parameter dict."""
-    parts = {"format": KEY_FORMAT, "code": method_fingerprint(method)["code"], "method": method,
+    parts = {"format": KEY_FORMAT, "code": _code(method), "method": method,
              "scene": scene_hash, "params": params, "calibration": _calibration_sha(params),
              "reference": ref_hash, "gl_renderer": gl_renderer, "versions": package_versions()}
     return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()
