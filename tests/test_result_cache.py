@@ -98,9 +98,10 @@ def test_key_follows_every_part(tmp_path):
                    {"gl_renderer": "NVIDIA H200"}, {"method": "dipole"}):
         assert result_key(**dict(base, **change)) != k, change
     cal = tmp_path / "cal.toml"
-    cal.write_text("a")
+    committed = (REPO / "baselines" / "calibrated" / "diffusion" / "calibrated.toml").read_text()
+    cal.write_text(committed)
     k1 = result_key(**dict(base, params={"mapping": f"calibrated:{cal}"}))
-    cal.write_text("b")                                       # the same path, another file
+    cal.write_text(committed + "\n# fitted again\n")            # the same path, another file
     assert result_key(**dict(base, params={"mapping": f"calibrated:{cal}"})) != k1
 
 

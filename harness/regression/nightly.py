@@ -26,6 +26,7 @@ matrix's products of those methods.
 """
 
 import json
+from collections import Counter
 from datetime import date as _date
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
@@ -394,11 +395,9 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
         changes = judged["changes"]
         tonight = [c for c in st.configs(run_id=run_id) if c["status"] == "ok"]
         reused = {(c["scene"], _label(c)) for c in tonight if c.get("cached_from")}
-        rendered = sorted(f"{c['scene']} {_label(c)}" for c in tonight if not c.get("cached_from"))
-        rendered_methods = {}
-        for c in tonight:
-            if not c.get("cached_from"):
-                rendered_methods[c.get("method", "sslpv")] = rendered_methods.get(c.get("method", "sslpv"), 0) + 1
+        fresh = [c for c in tonight if not c.get("cached_from")]
+        rendered = sorted(f"{c['scene']} {_label(c)}" for c in fresh)
+        rendered_methods = dict(Counter(c.get("method", "sslpv") for c in fresh))
         changed_pairs = [r for r in judged["images"] if r["changed"]]
         verdict = overall(changes, image_changed=bool(changed_pairs))
         steps.advance(detail=f"verdict: {verdict}")

@@ -24,6 +24,9 @@ import json
 import shutil
 from pathlib import Path
 
+from harness.errors import InputError
+from harness.io.atomic import atomic_dir
+
 __all__ = ["Memo", "code_hash", "configs_digest", "default_memo_dir"]
 
 #: The report's own modules: their code and the project code they import key every artefact.
@@ -95,13 +98,10 @@ class Memo:
         if folder is None:
             return
         try:
-            tmp = folder.with_name(folder.name + ".part")
-            shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir(parents=True)
-            for p, k in zip(paths, kept):
-                if p.is_file():
-                    shutil.copyfile(p, tmp / k)
-            shutil.rmtree(folder, ignore_errors=True)
-            tmp.rename(folder)
-        except OSError:
-            shutil.rmtree(tmp, ignore_errors=True)        # the memo is an optimisation: never fail a report
+            shutil.rmtree(folder, ignore_errors=True)     # an incomplete entry of the same key
+            with atomic_dir(folder) as tmp:
+                for p, k in zip(paths, kept):
+                    if p.is_file():
+                        shutil.copyfile(p, tmp / k)
+        except (OSError, InputError):
+            pass                                          # the memo is an optimisation: never fail a report

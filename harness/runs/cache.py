@@ -99,13 +99,12 @@ def reference_hash(ref_dir):
 
 
 def _calibration_sha(params):
-    from sslpv_gl.calibrated import parse_mapping, resolve_path
+    """The sha256 of the calibrated mapping file ``params`` names (its path is validated already), or None."""
+    from sslpv_gl.calibrated import load_calibrated, parse_mapping
+    from sslpv_gl.material import MAPPINGS
 
     path = parse_mapping(params.get("mapping"))
-    if path is None:
-        return None
-    p = resolve_path(path)
-    return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "missing"
+    return None if path is None else load_calibrated(path, tuple(MAPPINGS)).sha256
 
 
 @functools.lru_cache(maxsize=None)
