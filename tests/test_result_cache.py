@@ -216,3 +216,13 @@ def test_prune_keeps_the_newest_under_the_limit(tmp_path):
     cache.prune()
     assert [p.name[:2] for p in sorted(cache.root.glob("??/*"))] == ["02"]
     assert cache.get("02" + "f" * 62)["images"]["full"].shape == (4, 4, 3)
+
+
+@pytest.mark.parametrize("value", ["x", "0", "-5"])
+def test_a_bad_cache_limit_is_one_line(tmp_path, capsys, monkeypatch, value):
+    monkeypatch.setenv("SSLPV_RESULT_CACHE_LIMIT_MB", value)
+    code = main(SWEEP + ["--out", str(tmp_path / "a"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert err[0] == f"error: SSLPV_RESULT_CACHE_LIMIT_MB: limit: is {value!r}; give a size in MB above 0"
+    assert not (tmp_path / "a").exists()
