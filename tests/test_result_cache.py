@@ -7,6 +7,10 @@
 * **Reuse.** A second sweep of the same configurations renders nothing and records the
   same metrics, its rows naming the cache entry; ``--no-cache`` renders again; a changed
   calibrated mapping file or another GL renderer string is another key.
+* **Metric rows.** A second sweep takes the rows kept in the entry and measures nothing;
+  when the metric code's hash differs (a metric was edited) or the kept rows are unreadable,
+  the rows are measured again from the cached images, equal, and kept under the new hash.
+  An edit in a metric module changes that hash, an edit in a shader does not.
 * **Bad input.** A cache folder that is not ours is one line and exit 2, untouched; a corrupt
   entry and an entry of another key format are rendered again, with one line saying why.
 """
@@ -80,6 +84,28 @@ def test_an_edit_rekeys_exactly_the_methods_that_use_it(tree, rel, old, new, cha
     finally:
         restore()
     assert {m for m in before if before[m] != after[m]} == changed
+
+
+def _metrics_fingerprint(root):
+    code = "from harness.runs.fingerprint import metrics_fingerprint as f; print(f())"
+    return subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True,
+                          env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(root)}).stdout.strip()
+
+
+@pytest.mark.parametrize("rel, old, new, changed", [
+    ("harness/metrics/registry.py", "def compute_all(", "def  compute_all(", False),            # blank space
+    ("harness/metrics/colour_difference.py", "WHITE_PERCENTILE = 99.0", "WHITE_PERCENTILE = 99.5", True),
+    ("harness/runs/worker.py", "rows = []", "rows = list()", True),
+    ("sslpv_gl/shaders/shade.frag", "out_sub  = vec4(sub, 1.0);", "out_sub  = vec4(sub * 1.01, 1.0);", False),
+])
+def test_the_metric_code_hash_follows_the_metric_code_only(tree, rel, old, new, changed):
+    before = _metrics_fingerprint(tree)
+    restore = _edit(tree, rel, old, new)
+    try:
+        after = _metrics_fingerprint(tree)
+    finally:
+        restore()
+    assert (before != after) == changed
 
 
 def test_every_shader_is_found():
@@ -158,6 +184,33 @@ def test_a_second_sweep_renders_nothing(first, tmp_path, monkeypatch):
     third, _ = _sweep(tmp_path / "c", "--no-cache")
     assert third["reused"] == 0 and third["groups"] == 1
     assert _metrics(tmp_path / "c" / "store.sqlite")[0] == m1
+
+
+@pytest.mark.gl
+def test_metric_rows_are_kept_and_measured_again_when_their_code_changes(first, tmp_path, monkeypatch):
+    from harness.runs import cache as cache_mod, worker
+
+    root, _ = first
+    m1 = _metrics(root / "a" / "store.sqlite")[0]
+    shutil.copytree(root / "cache", tmp_path / "cache")
+    monkeypatch.setenv("SSLPV_RESULT_CACHE", str(tmp_path / "cache"))
+    entries = sorted(p for p in (tmp_path / "cache").glob("??/*") if p.is_dir())
+    assert all((e / "metrics.json").is_file() for e in entries) and len(entries) == 2
+
+    measured = []
+    real = worker.measure
+    monkeypatch.setattr(worker, "measure", lambda *a: measured.append(1) or real(*a))
+    _sweep(tmp_path / "b")                                         # kept rows: nothing measured
+    assert measured == [] and _metrics(tmp_path / "b" / "store.sqlite")[0] == m1
+
+    monkeypatch.setattr(cache_mod, "metrics_fingerprint", lambda: "another metric code")
+    _sweep(tmp_path / "c")                                         # a metric edited: measured again, equal
+    assert len(measured) == 2 and _metrics(tmp_path / "c" / "store.sqlite")[0] == m1
+    assert {json.loads((e / "metrics.json").read_text())["metrics_code"] for e in entries} == {"another metric code"}
+
+    (entries[0] / "metrics.json").write_text("{not json")          # unreadable rows: measured again
+    _sweep(tmp_path / "d")
+    assert len(measured) == 3 and _metrics(tmp_path / "d" / "store.sqlite")[0] == m1
 
 
 @pytest.mark.gl

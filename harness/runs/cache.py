@@ -21,10 +21,13 @@ part                   what it is
 ``format``             :data:`KEY_FORMAT`
 =====================  ==============================================================
 
-An entry holds the render (``images.npz``: subsurface, full, mask) and what the worker
-reported beside it (``result.json``: timings, diagnostics, work counts, warnings ...), but
-never the metrics: they are computed afresh from the images against the reference each
-time (:func:`harness.runs.worker.measure`), so a change of a metric's code needs no
+An entry holds the render (``images.npz``: subsurface, full, mask), what the worker
+reported beside it (``result.json``: timings, diagnostics, work counts, warnings ...) and
+its metric rows (``metrics.json``), stored under the hash of the code and packages that
+computed them (:func:`harness.runs.fingerprint.metrics_fingerprint`). The images and the
+reference are in the key, so the rows are served as they are while that hash is the same;
+when it is not (a metric's code was edited) they are measured again from the images
+(:func:`harness.runs.worker.measure`) and written back: a change of a metric's code needs no
 re-render. ``result.json`` records the sha256 of ``images.npz``; an entry whose files are
 missing, unreadable, of another key or another :data:`KEY_FORMAT`, or whose images do not
 match their hash, is never served: the configuration is rendered again and one line says
@@ -53,8 +56,8 @@ import numpy as np
 
 from harness import paths
 from harness.errors import InputError
-from harness.io.atomic import atomic_dir
-from harness.runs.fingerprint import method_fingerprint, package_versions
+from harness.io.atomic import atomic_dir, atomic_write
+from harness.runs.fingerprint import method_fingerprint, metrics_fingerprint, package_versions
 
 __all__ = ["KEY_FORMAT", "CACHE_MARKER", "DEFAULT_LIMIT_BYTES", "ResultCache", "SweepCache", "default_cache_dir",
            "result_key", "reference_hash", "STORED", "open_cache", "workers_gl_renderer", "local_gl_renderer"]
@@ -64,7 +67,7 @@ KEY_FORMAT = 1
 #: In the cache folder: marks it as ours and records the key format.
 CACHE_MARKER = ".sslpv-result-cache"
 DEFAULT_LIMIT_BYTES = 2 * 1024 ** 3
-#: What an entry keeps of a worker's result besides the images (the metrics are never kept).
+#: What an entry keeps of a worker's result besides the images and the metric rows.
 STORED = ("timings", "gl_renderer", "steps_used", "diagnostics", "calibration", "shared", "work", "precompute",
           "warnings")
 _REFERENCE_FILES = ("subsurface.exr", "full.exr", "half_a.exr", "half_b.exr", "mask.exr", "reference.json")
@@ -191,8 +194,32 @@ class ResultCache:
         os.utime(folder)                                   # least recently used goes first (prune)
         self.hits += 1
         out = {k: info["result"].get(k) for k in STORED}
-        out.update(status="ok", images=images, mask=mask, cached=key)
+        out.update(status="ok", images=images, mask=mask, cached=key, metrics=self._metrics(folder, key))
         return out
+
+    def _metrics(self, folder, key):
+        """The entry's metric rows if they were computed by today's metric code, else None (measure again)."""
+        try:
+            m = json.loads((folder / "metrics.json").read_text())
+        except (OSError, ValueError):
+            return None
+        if not isinstance(m, dict) or m.get("key") != key or m.get("metrics_code") != metrics_fingerprint() \
+                or not isinstance(m.get("rows"), list):
+            return None
+        return m["rows"]
+
+    def put_metrics(self, key, rows):
+        """Keep ``rows`` (:func:`harness.runs.worker.measure`) beside the entry of ``key``, if it exists."""
+        folder = self.entry(key)
+        if not folder.is_dir():
+            return
+        try:
+            # No default=: a row that JSON cannot hold exactly is not kept (it is measured next time).
+            text = json.dumps({"key": key, "metrics_code": metrics_fingerprint(), "rows": rows}) + "\n"
+            with atomic_write(folder / "metrics.json") as tmp:
+                tmp.write_text(text)
+        except (OSError, TypeError, ValueError, InputError):
+            pass                                           # an optimisation: the rows are measured next time
 
     def put(self, key, result):
         """Store an ``ok`` worker result under ``key`` (images, mask and :data:`STORED`)."""
@@ -212,6 +239,8 @@ class ResultCache:
         with atomic_dir(folder) as tmp:
             (tmp / "images.npz").write_bytes(data)
             (tmp / "result.json").write_text(json.dumps(info, default=str) + "\n")
+        if result.get("metrics") is not None:
+            self.put_metrics(key, result["metrics"])
 
     def prune(self):
         """Remove least recently used entries until the folder is under the limit; returns bytes removed."""

@@ -38,8 +38,8 @@ import re
 from harness import paths
 from harness.io.source import glsl_source_hash, import_closure, module_path, parsed, python_source_hash
 
-__all__ = ["ENTRIES", "ALWAYS", "PACKAGES", "SHADER_DIRS", "method_fingerprint", "method_modules", "method_shaders",
-           "package_versions"]
+__all__ = ["ENTRIES", "ALWAYS", "PACKAGES", "SHADER_DIRS", "METRIC_ENTRIES", "METRIC_PACKAGES", "method_fingerprint",
+           "method_modules", "method_shaders", "metrics_fingerprint", "package_versions"]
 
 #: Each method's entry points: the modules that render it and state its results.
 ENTRIES = {
@@ -54,6 +54,11 @@ ALWAYS = ("harness.runs.worker",)
 SHADER_DIRS = (paths.REPO / "dipole_gl" / "shaders", paths.REPO / "sslpv_gl" / "shaders")
 #: Packages whose version can change an image or how it is read.
 PACKAGES = ("numpy", "scipy", "moderngl", "glcontext", "pymeshlab", "OpenEXR", "pydantic")
+#: What a configuration's metric rows are computed by: the metrics package (with its imports) and the
+#: worker module whose ``measure`` and ``reference_floors`` call it (without its imports: those are the methods).
+METRIC_ENTRIES = ("harness.metrics",)
+#: Packages whose version can change a metric's value.
+METRIC_PACKAGES = ("numpy", "scipy", "flip-evaluator", "colour-science", "scikit-image", "OpenEXR")
 _SHADER_NAME = re.compile(r"^[A-Za-z0-9_]+\.(?:vert|frag|comp|glsl)$")
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"', re.M)
 
@@ -91,10 +96,10 @@ def method_shaders(method):
 
 
 @functools.lru_cache(maxsize=None)
-def package_versions():
-    """``{package: version}`` of :data:`PACKAGES` (absent ones omitted) and Python's."""
+def package_versions(packages=PACKAGES):
+    """``{package: version}`` of ``packages`` (default :data:`PACKAGES`; absent ones omitted) and Python's."""
     out = {"python": platform.python_version()}
-    for name in PACKAGES:
+    for name in packages:
         try:
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
@@ -108,3 +113,17 @@ def method_fingerprint(method):
     shaders = {str(p.relative_to(paths.REPO)): glsl_source_hash(p.read_text()) for p in method_shaders(method)}
     blob = repr((sorted(modules.items()), sorted(shaders.items()))).encode()
     return {"code": hashlib.sha256(blob).hexdigest(), "modules": modules, "shaders": shaders}
+
+
+@functools.lru_cache(maxsize=1)
+def metrics_fingerprint():
+    """sha256 of the code and packages that turn a render and its reference into metric rows.
+
+    The result cache keeps a configuration's metric rows beside its images under this hash
+    (:mod:`harness.runs.cache`): the images and the reference are in the entry's key already, so
+    the rows are reused exactly while this hash is unchanged, and measured again otherwise.
+    Computed once per process (the files do not change while a sweep runs).
+    """
+    modules = {m: python_source_hash(module_path(m)) for m in sorted(set(import_closure(METRIC_ENTRIES)) | set(ALWAYS))}
+    blob = repr((sorted(modules.items()), sorted(package_versions(METRIC_PACKAGES).items()))).encode()
+    return hashlib.sha256(blob).hexdigest()

@@ -448,8 +448,8 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     ``cache``: the result cache (:mod:`harness.runs.cache`) that configurations are served from
     and stored in: True for the default folder, a :class:`~harness.runs.cache.ResultCache`, or
     False to render everything afresh (``--no-cache``). A served configuration is recorded like a
-    rendered one, with its metrics computed now against this sweep's reference, and its store row
-    names the cache entry (``cached_from``).
+    rendered one, with the metric rows kept in its entry (measured again when the metric code has
+    changed since), and its store row names the cache entry (``cached_from``).
     """
     from harness.progress import Progress
     from harness.store import Store
@@ -493,7 +493,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
                 if results_cache is not None and todo:
                     reuse = SweepCache(results_cache, workers_gl_renderer(client), refs)
                     hits, todo = reuse.split(todo, method_of)
-                    _record_cached(store, run_id, hits, arrays, out, refs, summary)
+                    _record_cached(store, run_id, hits, arrays, out, refs, summary, results_cache)
                     if progress and (hits or results_cache.rejected):
                         Progress("sweep", None).log(f"result cache {results_cache.root}: {len(hits)} of "
                                                     f"{len(hits) + len(todo)} configurations reused, "
@@ -531,19 +531,28 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     return summary
 
 
-def _record_cached(store, run_id, hits, arrays, out, refs, summary):
-    """Record configurations served by the result cache, measured now against this sweep's references."""
+def _record_cached(store, run_id, hits, arrays, out, refs, summary, cache):
+    """Record configurations served by the result cache.
+
+    Their metric rows come from the entry when today's metric code computed them (the entry's key
+    holds the images and the reference); otherwise they are measured now against this sweep's
+    reference and kept in the entry for the next time (:meth:`ResultCache.put_metrics`).
+    """
     from harness.io.images import auto_exposure
 
     from harness.runs import worker as sweep_worker
 
-    floors = {}
+    floors, exposure = {}, {}
     for s, p, key, res in hits:
         arr = arrays[s.name]
-        if s.name not in floors:
-            floors[s.name] = (sweep_worker.reference_floors(arr), auto_exposure(arr["subsurface"]))
-        res["metrics"] = sweep_worker.measure(res["images"], arr, floors[s.name][0])
-        _record(store, run_id, s, p, key, res, out, refs, summary, floors[s.name][1])
+        if s.name not in exposure:
+            exposure[s.name] = auto_exposure(arr["subsurface"])
+        if res.get("metrics") is None:
+            if s.name not in floors:
+                floors[s.name] = sweep_worker.reference_floors(arr)
+            res["metrics"] = sweep_worker.measure(res["images"], arr, floors[s.name])
+            cache.put_metrics(res["cached"], res["metrics"])
+        _record(store, run_id, s, p, key, res, out, refs, summary, exposure[s.name])
         summary["reused"] += 1
 
 
