@@ -47,8 +47,8 @@ ENTRIES = {
     "dipole": ("dipole_gl.renderer", "harness.methods.dipole"),
     "dirpole": ("dipole_gl.renderer", "harness.methods.dipole"),
 }
-#: Modules in every method's fingerprint, without their imports (those are the metrics, which
-#: the cache never stores: they are computed afresh against the reference of the night).
+#: Modules in every method's fingerprint, without their imports (those are the metrics, which key
+#: the entry's metric rows separately: :func:`metrics_fingerprint`).
 ALWAYS = ("harness.runs.worker",)
 #: Shader folders, searched in this order for a name (dipole_gl's own first, as ``dipole_gl.glsl.DIRS``).
 SHADER_DIRS = (paths.REPO / "dipole_gl" / "shaders", paths.REPO / "sslpv_gl" / "shaders")
