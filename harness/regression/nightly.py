@@ -26,6 +26,7 @@ matrix's products of those methods.
 """
 
 import json
+import os
 from collections import Counter
 from datetime import date as _date
 from pathlib import Path
@@ -269,8 +270,30 @@ def trend_plots(store, night_run_ids, out_dir):
     (:func:`trend_series`).
 
     One panel per mapping; colour is the grid resolution N, line style the step count;
-    the y axis is the metric's badness (distance from its ideal) on a log scale.
+    the y axis is the metric's badness (distance from its ideal) on a log scale. The figures
+    are independent of each other, so from :data:`TRENDS_PARALLEL_FROM` figures on they are
+    drawn in processes of their own, one per core (matplotlib draws in one thread).
     """
+    series = sorted(trend_series(store, night_run_ids).items())
+    jobs = [(scene, metric, lines, str(out_dir)) for (scene, metric), lines in series]
+    workers = min(len(jobs), os.cpu_count() or 1)
+    if workers > 1 and len(jobs) >= TRENDS_PARALLEL_FROM:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            names = list(pool.map(_trend_figure, jobs, chunksize=max(len(jobs) // (4 * workers), 1)))
+    else:
+        names = [_trend_figure(job) for job in jobs]
+    return [{"scene": scene, "metric": metric, "file": name} for (scene, metric, _, _), name in zip(jobs, names)]
+
+
+#: Trend figures are drawn in parallel (one process per core) from this many on.
+TRENDS_PARALLEL_FROM = 8
+
+
+def _trend_figure(job):
+    """One trend figure of :func:`trend_plots` -> its file name."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -279,40 +302,51 @@ def trend_plots(store, night_run_ids, out_dir):
 
     from harness.report.plots import steps_key
 
-    series = trend_series(store, night_run_ids)
+    scene, metric, lines, out_dir = job
+    out_dir = Path(out_dir)
     styles = ["-", "--", ":", "-."]
-    out = []
-    for (scene, metric), lines in sorted(series.items()):
-        mappings = sorted({k[0] for k in lines})
-        grids = sorted({k[1] for k in lines})
-        steps = sorted({k[2] for k in lines}, key=steps_key)
-        fig, axes = plt.subplots(1, len(mappings), figsize=(4.2 * len(mappings) + 1.6, 3.4), squeeze=False,
-                                 sharey=True)
-        for ax, mapping in zip(axes[0], mappings):
-            for (mp, n, k, extra), pts in sorted(lines.items(), key=lambda kv: (str(kv[0][0]), kv[0][1],
-                                                                              steps_key(kv[0][2]), kv[0][3])):
-                if mp != mapping:
-                    continue
-                colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
-                ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
-                        color=colour, ls=styles[steps.index(k) % len(styles)], label=(f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k))
-            ax.set_yscale("log")
-            # No minor ticks: on a log axis shared by five panels they are most of a figure's time
-            # (matplotlib copies every tick's style), and the nights' values need only the decades.
-            ax.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
-            ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
-                         fontsize=9)
-            ax.tick_params(axis="x", labelrotation=30, labelsize=7)
-        ideal = "|x - 1|" if metric == "energy_ratio" else "value"
-        axes[0][0].set_ylabel(f"{metric} ({ideal})")
-        axes[0][-1].legend(fontsize=6, ncol=1, loc="upper left", bbox_to_anchor=(1.02, 1.0))
-        fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better)", fontsize=10)
-        fig.tight_layout()
-        name = f"trend_{scene}_{metric}.png"
-        fig.savefig(out_dir / name, dpi=90)
-        plt.close(fig)
-        out.append({"scene": scene, "metric": metric, "file": name})
-    return out
+    mappings = sorted({k[0] for k in lines})
+    grids = sorted({k[1] for k in lines})
+    steps = sorted({k[2] for k in lines}, key=steps_key)
+    labels = {}                                         # label -> handle, over every panel
+    for (mp, n, k, extra) in lines:
+        labels.setdefault((f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k), None)
+    # Fixed margins in inches (y label, rotated dates, title, and a legend as wide as its longest
+    # label right of the panels) instead of tight_layout, which lays every tick label out again.
+    h = 3.4
+    rows = max(int((h - 0.7) / 0.12), 1)              # legend entries per column at fontsize 6
+    ncol = -(-len(labels) // rows)
+    legend_w = ncol * (0.45 + 0.042 * max(len(lab) for lab in labels))
+    w = 4.2 * len(mappings) + 0.75 + legend_w
+    fig, axes = plt.subplots(1, len(mappings), figsize=(w, h), squeeze=False, sharey=True)
+    for ax, mapping in zip(axes[0], mappings):
+        for (mp, n, k, extra), pts in sorted(lines.items(), key=lambda kv: (str(kv[0][0]), kv[0][1],
+                                                                          steps_key(kv[0][2]), kv[0][3])):
+            if mp != mapping:
+                continue
+            colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
+            label = (f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k)
+            line, = ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
+                            color=colour, ls=styles[steps.index(k) % len(styles)])
+            labels[label] = labels[label] or line
+        ax.set_yscale("log")
+        # No minor ticks: on a log axis shared by five panels they are most of a figure's time
+        # (matplotlib copies every tick's style), and the nights' values need only the decades.
+        ax.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+        ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
+                     fontsize=9)
+        ax.tick_params(axis="x", labelrotation=30, labelsize=7)
+    ideal = "|x - 1|" if metric == "energy_ratio" else "value"
+    axes[0][0].set_ylabel(f"{metric} ({ideal})")
+    # One legend for the figure: colour is N and line style K in every SSLPV panel; a rival by its label.
+    fig.legend(list(labels.values()), list(labels), fontsize=6, ncol=ncol, loc="upper right",
+               bbox_to_anchor=(1.0, 1 - 0.55 / h), frameon=False)
+    fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better)", fontsize=10)
+    fig.subplots_adjust(left=0.75 / w, right=1 - legend_w / w, bottom=0.75 / h, top=1 - 0.55 / h, wspace=0.08)
+    name = f"trend_{scene}_{metric}.png"
+    fig.savefig(out_dir / name, dpi=90)
+    plt.close(fig)
+    return name
 
 
 def _short_mapping(mapping):
