@@ -212,6 +212,8 @@ def test_progress_lines_show_prediction_noise_and_eta(mi, tmp_path, monkeypatch,
     render_reference(_tiny(size=12), tmp_path / "r", target_rel_se=0.2, K=2, progress=True)
     err = capsys.readouterr().err
     assert "reference sphere_homogeneous: pilot measured" in err and "predicted 2 seeds x" in err
+    # The cost model's prediction, made before rendering, is set beside the pilot's, which replaces it.
+    assert "the cost model predicted" in err and "the pilot's prediction replaces it (x" in err
     assert "in this process" in err and "median rel. SE" in err and "ETA" in err
     assert "done: median rel. SE" in err
     for line in err.strip().splitlines():

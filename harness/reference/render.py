@@ -526,7 +526,8 @@ class ReferencePlan:
                 want = PILOT_SPP
             self.pilot = {"K": PILOT_K, "spp": PILOT_SPP, "median_rel_se_subsurface": r_p,
                           "seconds": self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
-                          "predicted_wall_seconds": self._round_wall(want)}
+                          "predicted_wall_seconds": self._round_wall(want),
+                          "cost_model_seconds": self._cost_model_seconds()}
             self.progress.log(self._prediction_line(r_p, want, capped))
         n_steps = self.steps or (1 if self.spp_fixed is not None else min(STEPS, max(1, want // STEP_MIN_SPP)))
         step_size = max(1, math.ceil(want / n_steps))
@@ -574,12 +575,30 @@ class ReferencePlan:
                 self.progress.update(total=K * want)
         self.capped_by = self.capped_by or capped
 
+    def _cost_model_seconds(self):
+        """What the cost model (``reference --estimate``, :func:`harness.reference.cost.estimate_reference`)
+        predicts, before any rendering, for the final render's samples on the cores at hand; None where it
+        cannot predict (the pilot's prediction is compared with it in the log)."""
+        from harness.reference.cost import estimate_reference
+
+        try:
+            est = estimate_reference(self.scene, self.target, workers=None if self.executor == "serial" else
+                                     self.slots, coverage=self.coverage)
+        except (ValueError, KeyError, OSError, InputError):
+            return None
+        return float(est["predicted_spp_total"] * est["seconds_per_spp"])
+
     def _prediction_line(self, r_p, want, capped):
         where = ("in this process" if self.executor == "serial" else
                  f"on {self.executor} ({self.slots} job{'s' if self.slots > 1 else ''} at a time)")
         wall = self._round_wall(want)
         line = (f"pilot measured {r_p:.2%} median relative SE; predicted {self.K} seeds x {want} spp "
                 f"({self.K * want} in all) to reach {self.target:.2%}, about {format_duration(wall)} {where}")
+        model = (self.pilot or {}).get("cost_model_seconds")
+        if model:
+            # The cost model never saw this scene's render; the pilot has. Its prediction replaces the model's.
+            line += (f"; the cost model predicted {format_duration(model)} before rendering: the pilot's "
+                     f"prediction replaces it (x{wall / model:.2f})")
         if capped:
             line += f" (capped by {capped})"
         if self.deadline is not None and wall > self.seconds_left():
