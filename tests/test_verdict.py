@@ -111,3 +111,54 @@ def test_judge_images_catches_a_darker_image_and_calls_the_same_image_within_noi
     same = judge_images("s", "c", "subsurface", old * (1 + 1e-4), old, ref, se, mask, {"rel": 0.03, "abs": 1e-4},
                         family=8, k=8)
     assert overall(same) == "changed-within-noise"
+
+
+class TestWithinTolerance:
+    """A resampled standard error (FLIP: 2 x draws evaluations of the metric) is skipped where no
+    standard error could change the verdict, |Delta| <= tol; elsewhere it is estimated as before."""
+
+    @staticmethod
+    def _pair(scale, seed=5):
+        rng = np.random.default_rng(seed)
+        truth = rng.uniform(0.2, 1.0, (20, 20, 1)) * np.ones((1, 1, 3))
+        se = 0.02 * truth
+        ref = truth + se * rng.standard_normal((20, 20, 1))
+        return truth * scale, truth * 1.02, ref, se, np.ones((20, 20), bool)
+
+    def test_the_same_verdicts_with_and_without_the_shortcut(self, monkeypatch):
+        from harness.metrics import uncertainty
+
+        tol = {"rel": 0.05, "abs": 1e-4}
+        real = uncertainty.paired_difference
+        skipped = 0
+        for scale in (1.02 * (1 + 1e-4), 1.0, 1.03, 0.97, 0.9, 0.7, 1.2):
+            new, old, ref, se, mask = self._pair(scale)
+            with_short = judge_images("s", "c", "subsurface", new, old, ref, se, mask, tol, family=8, k=8,
+                                      metrics=("flip",))[0]
+            monkeypatch.setattr(uncertainty, "paired_difference",
+                                lambda *a, decided_within=None, **kw: real(*a, **kw))
+            without = judge_images("s", "c", "subsurface", new, old, ref, se, mask, tol, family=8, k=8,
+                                   metrics=("flip",))[0]
+            monkeypatch.setattr(uncertainty, "paired_difference", real)
+            assert with_short.verdict == without.verdict and with_short.delta == without.delta, scale
+            assert without.method == "resampling" and math.isfinite(without.se)
+            if with_short.method == "within-tolerance":
+                skipped += 1
+                assert abs(with_short.delta) <= with_short.tolerance and math.isnan(with_short.se)
+                assert with_short.verdict == "changed-within-noise"
+                assert with_short.as_dict()["se"] is None and "no SE needed" in with_short.line()
+            else:
+                assert with_short.se == without.se
+        assert 0 < skipped < 7                      # both branches were taken
+
+    def test_resampling_is_skipped_only_within_the_tolerance(self):
+        from harness.metrics.uncertainty import paired_difference
+
+        new, old, ref, se, mask = self._pair(1.0)
+        d = paired_difference("flip", new, old, ref, se, mask, k=8, decided_within=lambda v: 1e9)
+        assert d.method == "within-tolerance" and math.isnan(d.se)
+        d = paired_difference("flip", new, old, ref, se, mask, k=8, decided_within=0.0)
+        assert d.method == "resampling" and d.se > 0
+        with pytest.raises(ValueError, match="beyond the tolerance"):
+            judge("s", "c", "subsurface", PairedDifference("flip", 0.1, 0.5, 0.4, math.nan, math.nan,
+                                                           "within-tolerance", {}))

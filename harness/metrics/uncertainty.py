@@ -38,6 +38,8 @@ references in ``tests/test_uncertainty.py`` (synthetic) and
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 from harness.metrics.pixel import RELMSE_EPS
@@ -132,7 +134,7 @@ class PairedDifference:
     dof : float
         Degrees of freedom of ``se`` (``inf`` when the reference's seed count is unknown).
     method : str
-        ``"delta"`` or ``"resampling"``.
+        ``"delta"``, ``"resampling"``, or ``"within-tolerance"`` (no standard error was needed).
     params : dict
         How ``se`` was obtained (draws, seed, seed count ``K``).
     """
@@ -180,7 +182,8 @@ def _values(name, new, old, ref, mask):
     return rn, ro
 
 
-def paired_difference(name, new, old, ref, se, mask=None, *, k=None, draws=DEFAULT_DRAWS, seed=0):
+def paired_difference(name, new, old, ref, se, mask=None, *, k=None, draws=DEFAULT_DRAWS, seed=0,
+                      decided_within=None):
     """Paired difference of metric ``name`` for two test images against one reference.
 
     Parameters
@@ -200,6 +203,11 @@ def paired_difference(name, new, old, ref, se, mask=None, *, k=None, draws=DEFAU
         Resamples for a metric without a gradient (at least 2).
     seed : int, default 0
         Seed of the resamples (a verdict is reproducible).
+    decided_within : float or callable, optional
+        A tolerance (or a function of the old image's metric value that gives it) below which a
+        verdict needs no standard error: when ``|delta|`` is at most this, the resamples are skipped (the costly part: ``2 draws`` evaluations of the metric)
+        and ``se`` and ``dof`` are NaN, ``method`` ``"within-tolerance"``. A judge whose
+        threshold is ``tolerance + t SE`` reaches the same verdict with any ``SE >= 0``.
 
     Returns
     -------
@@ -233,6 +241,12 @@ def paired_difference(name, new, old, ref, se, mask=None, *, k=None, draws=DEFAU
     draws = int(draws)
     if draws < 2:
         raise ValueError(f"paired_difference: draws must be >= 2, got {draws}")
+    if callable(decided_within):
+        decided_within = decided_within(ro.value)
+    if decided_within is not None and abs(delta) <= float(decided_within):
+        return PairedDifference(name, float(ro.value), float(rn.value), float(delta), math.nan, math.nan,
+                                "within-tolerance", {"K": k, "decided_within": float(decided_within),
+                                                     "resamples": "skipped: |delta| is within the tolerance"})
     rng = np.random.default_rng(seed)
     out = np.empty(draws)
     for b in range(draws):

@@ -31,7 +31,9 @@ and is then "changed" on NVIDIA by up to 1e-2.
 **2. Better or worse?** (:func:`judge`). For each headline metric, ``Delta =
 badness(new, ref) - badness(old, ref)`` with its standard error from the reference's
 per-pixel standard error (:mod:`harness.metrics.uncertainty`: the delta method, or
-resampling for FLIP). A pair is
+resampling for FLIP; a resampled SE is not estimated where ``|Delta| <= tol``, since no SE can
+make such a pair anything but changed-within-noise: its ``se`` is NaN and its method
+``within-tolerance``). A pair is
 
 * a **regression** when ``Delta > tol + t * SE``,
 * an **improvement** when ``-Delta > tol + t * SE``,
@@ -170,12 +172,15 @@ class Change:
 
     def as_dict(self):
         d = asdict(self)
-        for k in ("z", "dof"):                   # JSON has no infinity
+        for k in ("se", "z", "dof", "critical"):  # JSON has no infinity or NaN (no SE: within the tolerance)
             if not np.isfinite(d[k]):
                 d[k] = None if np.isnan(d[k]) else (1e308 if d[k] > 0 else -1e308)
         return d
 
     def line(self):
+        if self.method == "within-tolerance":
+            return (f"{self.metric:<13} old {self.old:.6g} new {self.new:.6g}  Delta {self.delta:+.4g}  within the "
+                    f"tolerance {self.tolerance:.3g} (no SE needed)  {self.verdict.upper()}")
         z = f"{self.z:+.3g}" if np.isfinite(self.z) else ("+inf" if self.z > 0 else "-inf")
         return (f"{self.metric:<13} old {self.old:.6g} new {self.new:.6g}  Delta {self.delta:+.4g}  "
                 f"SE {self.se:.3g}  z {z}  threshold {self.threshold:.4g} (tol {self.tolerance:.3g} + "
@@ -190,9 +195,15 @@ def tolerance_of(metric, old_value, tolerance=None):
 def judge(scene, config, image, diff, tolerance=None, family=1, against="baseline", alpha=ALPHA):
     """One :class:`Change` from a :class:`harness.metrics.uncertainty.PairedDifference`."""
     tol = tolerance_of(diff.metric, diff.old, tolerance)
+    delta = diff.delta
+    if diff.method == "within-tolerance":
+        # |delta| <= tol <= tol + t SE for any SE: within noise, and no SE was estimated.
+        if abs(delta) > tol:
+            raise ValueError(f"{diff.metric}: a difference without a standard error is beyond the tolerance")
+        return Change(scene, config, image, diff.metric, diff.old, diff.new, float(delta), math.nan, math.nan,
+                      math.nan, math.nan, int(family), tol, tol, "changed-within-noise", against, diff.method)
     t = critical_value(family, alpha, diff.dof)
     threshold = tol + t * diff.se
-    delta = diff.delta
     verdict = ("regression" if delta > threshold else "improvement" if -delta > threshold
                else "changed-within-noise")
     z = delta / diff.se if diff.se > 0 else (math.copysign(math.inf, delta) if delta else 0.0)
@@ -217,8 +228,10 @@ def judge_images(scene, config, image, new, old, ref, se, mask, tolerance=None, 
 
     out = []
     for metric in metrics:
+        # A resampled SE (FLIP: 2 x draws evaluations) only where it can change the verdict.
         diff = paired_difference(metric, new, old, ref, se, mask, k=k, draws=draws or DEFAULT_DRAWS,
-                                 seed=resample_seed(scene, config, image, metric, against))
+                                 seed=resample_seed(scene, config, image, metric, against),
+                                 decided_within=lambda old_value, m=metric: tolerance_of(m, old_value, tolerance))
         out.append(judge(scene, config, image, diff, tolerance, family, against, alpha))
     return out
 
