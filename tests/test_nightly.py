@@ -180,3 +180,4 @@ def test_trend_series_mixes_step_modes_and_keeps_settings_apart(tmp_path):
     assert lines[("diffusion", 32, 8, "skip=0")] == [("2026-11-20", 0.1), ("2026-11-21", 0.2)]
     out = trend_plots(Store(), nights, tmp_path)
     assert [o["file"] for o in out] == ["trend_thin_ring_relmse.png"] and (tmp_path / out[0]["file"]).is_file()
+    assert (tmp_path / "trend_legend.png").is_file()        # one legend for every figure of the night

@@ -266,16 +266,22 @@ def trend_series(store, night_run_ids):
 
 
 def trend_plots(store, night_run_ids, out_dir):
-    """Per scene and headline metric: the subsurface value over nights, one line per configuration
-    (:func:`trend_series`).
+    """Per scene and headline metric: the subsurface value over the last :data:`TREND_NIGHTS` nights,
+    one line per configuration (:func:`trend_series`), and one legend for all of them.
 
     One panel per mapping; colour is the grid resolution N, line style the step count;
-    the y axis is the metric's badness (distance from its ideal) on a log scale. The figures
-    are independent of each other, so from :data:`TRENDS_PARALLEL_FROM` figures on they are
-    drawn in processes of their own, one per core (matplotlib draws in one thread).
+    the y axis is the metric's badness (distance from its ideal) on a log scale. The
+    legend (``trend_legend.png``) is drawn once: every figure of a night shows the
+    matrix's configurations with the same colours and styles. The figures are independent of
+    each other, so from :data:`TRENDS_PARALLEL_FROM` figures on they are drawn in processes of
+    their own, one per core (matplotlib draws in one thread).
     """
+    night_run_ids = list(night_run_ids)[-TREND_NIGHTS:]
     series = sorted(trend_series(store, night_run_ids).items())
-    jobs = [(scene, metric, lines, str(out_dir)) for (scene, metric), lines in series]
+    nights = [night for _, night in night_run_ids]
+    lines = sorted({line for _, ls in series for line in ls}, key=_line_order)
+    style = _trend_styles(lines)
+    jobs = [(scene, metric, ls, nights, style, str(out_dir)) for (scene, metric), ls in series]
     workers = min(len(jobs), os.cpu_count() or 1)
     if workers > 1 and len(jobs) >= TRENDS_PARALLEL_FROM:
         import multiprocessing
@@ -285,11 +291,50 @@ def trend_plots(store, night_run_ids, out_dir):
             names = list(pool.map(_trend_figure, jobs, chunksize=max(len(jobs) // (4 * workers), 1)))
     else:
         names = [_trend_figure(job) for job in jobs]
-    return [{"scene": scene, "metric": metric, "file": name} for (scene, metric, _, _), name in zip(jobs, names)]
+    if jobs:
+        _trend_legend(lines, style, Path(out_dir) / TREND_LEGEND)
+    return [{"scene": scene, "metric": metric, "file": name} for (scene, metric, *_), name in zip(jobs, names)]
 
 
 #: Trend figures are drawn in parallel (one process per core) from this many on.
 TRENDS_PARALLEL_FROM = 8
+#: The nights a trend figure shows, newest last (the store keeps them all).
+TREND_NIGHTS = 60
+#: The legend image shared by a night's trend figures.
+TREND_LEGEND = "trend_legend.png"
+
+
+def _line_order(line):
+    from harness.report.plots import steps_key
+
+    mapping, n, k, extra = line
+    return (str(mapping), n, steps_key(k), extra)
+
+
+def _line_label(line):
+    mapping, n, k, extra = line
+    return (f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k)
+
+
+def _trend_styles(lines):
+    """``{label: (colour, line style)}``: colour is N (viridis), style the step count; a rival's line black."""
+    import matplotlib
+
+    from harness.report.plots import steps_key
+
+    grids = sorted({line[1] for line in lines if line[1]})
+    steps = sorted({line[2] for line in lines if line[1]}, key=steps_key)
+    styles = ["-", "--", ":", "-."]
+    out = {}
+    for line in lines:
+        _, n, k, _ = line
+        if n:
+            colour = matplotlib.colormaps["viridis"](grids.index(n) / max(len(grids) - 1, 1))
+            out[_line_label(line)] = (tuple(float(c) for c in colour), styles[steps.index(k) % len(styles)])
+        else:
+            out[_line_label(line)] = ((0.0, 0.0, 0.0, 1.0), styles[sorted({x[2] for x in lines if not x[1]})
+                                                                     .index(k) % len(styles)])
+    return out
 
 
 def _trend_figure(job):
@@ -300,53 +345,65 @@ def _trend_figure(job):
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    from harness.report.plots import steps_key
-
-    scene, metric, lines, out_dir = job
-    out_dir = Path(out_dir)
-    styles = ["-", "--", ":", "-."]
+    scene, metric, lines, nights, style, out_dir = job
+    x_of = {night: i for i, night in enumerate(nights)}
     mappings = sorted({k[0] for k in lines})
-    grids = sorted({k[1] for k in lines})
-    steps = sorted({k[2] for k in lines}, key=steps_key)
-    labels = {}                                         # label -> handle, over every panel
-    for (mp, n, k, extra) in lines:
-        labels.setdefault((f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k), None)
-    # Fixed margins in inches (y label, rotated dates, title, and a legend as wide as its longest
-    # label right of the panels) instead of tight_layout, which lays every tick label out again.
-    h = 3.4
-    rows = max(int((h - 0.7) / 0.12), 1)              # legend entries per column at fontsize 6
-    ncol = -(-len(labels) // rows)
-    legend_w = ncol * (0.45 + 0.042 * max(len(lab) for lab in labels))
-    w = 4.2 * len(mappings) + 0.75 + legend_w
+    w, h = 4.2 * len(mappings) + 0.9, 3.2
     fig, axes = plt.subplots(1, len(mappings), figsize=(w, h), squeeze=False, sharey=True)
     for ax, mapping in zip(axes[0], mappings):
-        for (mp, n, k, extra), pts in sorted(lines.items(), key=lambda kv: (str(kv[0][0]), kv[0][1],
-                                                                          steps_key(kv[0][2]), kv[0][3])):
-            if mp != mapping:
+        for line, pts in sorted(lines.items(), key=lambda kv: _line_order(kv[0])):
+            if line[0] != mapping:
                 continue
-            colour = plt.cm.viridis(grids.index(n) / max(len(grids) - 1, 1))
-            label = (f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k)
-            line, = ax.plot([p[0] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
-                            color=colour, ls=styles[steps.index(k) % len(styles)])
-            labels[label] = labels[label] or line
+            colour, ls = style[_line_label(line)]
+            ax.plot([x_of[p[0]] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
+                    color=colour, ls=ls)
         ax.set_yscale("log")
-        # No minor ticks: on a log axis shared by five panels they are most of a figure's time
-        # (matplotlib copies every tick's style), and the nights' values need only the decades.
+        # No minor ticks and at most six dates: on log axes shared by several panels, ticks and their
+        # labels are most of a figure's time, and the nights' values need only the decades.
         ax.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(6, integer=True))
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(
+            lambda v, _pos: str(nights[int(v)]) if float(v).is_integer() and 0 <= int(v) < len(nights) else ""))
+        ax.set_xlim(-0.5, len(nights) - 0.5)
         ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
                      fontsize=9)
         ax.tick_params(axis="x", labelrotation=30, labelsize=7)
     ideal = "|x - 1|" if metric == "energy_ratio" else "value"
     axes[0][0].set_ylabel(f"{metric} ({ideal})")
-    # One legend for the figure: colour is N and line style K in every SSLPV panel; a rival by its label.
-    fig.legend(list(labels.values()), list(labels), fontsize=6, ncol=ncol, loc="upper right",
-               bbox_to_anchor=(1.0, 1 - 0.55 / h), frameon=False)
-    fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better)", fontsize=10)
-    fig.subplots_adjust(left=0.75 / w, right=1 - legend_w / w, bottom=0.75 / h, top=1 - 0.55 / h, wspace=0.08)
+    fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better; legend: "
+                 f"{TREND_LEGEND})", fontsize=10)
+    # Fixed margins in inches (y label, rotated dates, title) instead of tight_layout, which lays
+    # every tick label out again.
+    fig.subplots_adjust(left=0.75 / w, right=1 - 0.15 / w, bottom=0.75 / h, top=1 - 0.55 / h, wspace=0.08)
     name = f"trend_{scene}_{metric}.png"
-    fig.savefig(out_dir / name, dpi=90)
+    fig.savefig(Path(out_dir) / name, dpi=90)
     plt.close(fig)
     return name
+
+
+def _trend_legend(lines, style, path):
+    """The legend of every trend figure: one entry per line label, in columns."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from harness.report.plots import steps_key
+
+    # SSLPV's by N, then K; the rivals' after them.
+    ordered = sorted(lines, key=lambda ln: (0, ln[1], steps_key(ln[2]), ln[3]) if ln[1] else (1, 0, 0, str(ln[2])))
+    labels = list(dict.fromkeys(_line_label(line) for line in ordered))
+    rows = 12
+    ncol = -(-len(labels) // rows)
+    width = ncol * (0.5 + 0.045 * max(len(lab) for lab in labels))
+    fig = plt.figure(figsize=(width, 0.2 * min(rows, len(labels)) + 0.5))
+    handles = [Line2D([], [], color=style[lab][0], ls=style[lab][1], marker="o", ms=3, lw=1) for lab in labels]
+    fig.legend(handles, labels, loc="center", ncol=ncol, fontsize=7, frameon=False,
+               title="colour: grid N; line style: steps K (SSLPV); black: a rival's configuration",
+               title_fontsize=7)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def _short_mapping(mapping):
