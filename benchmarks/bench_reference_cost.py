@@ -51,8 +51,18 @@ FAMILY_GRID = [(st, a, 0.0) for st in (1.5, 6.0, 24.0, 96.0, 192.0) for a in (0.
 
 # --------------------------------------------------------------------------- the data
 
-def ref_entry(meta, summ, cores_model):
-    """A committed reference's row (how it WAS rendered), time points and noise point."""
+def todays_choice(scene, summ):
+    """The passes and Russian roulette depths today's renderer would choose for ``scene``."""
+    from harness.reference import mitsuba_scene as ms
+
+    split = ms.channel_passes(scene.medium) != (None,)
+    amax = summ["albedo_max"]
+    return (3 if split else 1), ([ms.rr_depth_for(a) for a in amax] if split else [ms.rr_depth_for(max(amax))])
+
+
+def ref_entry(meta, summ, cores_model, today=None):
+    """A committed reference's row (how it WAS rendered), time points and noise point; ``today``: the
+    (passes, rr_depths) today's renderer would choose, to flag references rendered with other choices."""
     integ = meta["integrator"]
     per_pass = [integ[c] for c in ("R", "G", "B")] if "R" in integ else [integ]
     row = cost.scene_row(summ, covered=meta["covered_pixels"], passes=len(per_pass),
@@ -75,7 +85,10 @@ def ref_entry(meta, summ, cores_model):
     return {"scene": meta["scene"], "row": row, "time": times, "noise": noise, "target": meta["target_rel_se"],
             "rounds": n_rounds, "K": meta["K"], "spp_total": meta["spp_total"], "wall": meta["wall_seconds"],
             "overhead": meta["wall_seconds"] - meta["render_seconds"] * scale,
-            "executor": meta.get("executor", "serial")}
+            "executor": meta.get("executor", "serial"),
+            "pilot_predicted": pilot.get("predicted_wall_seconds"),
+            "changed": today is not None and (today[0] != len(per_pass) or
+                                              list(today[1]) != [p["rr_depth"] for p in per_pass])}
 
 
 def family_entries(points):
@@ -97,7 +110,9 @@ def load_refs(cores_model):
     entries = []
     for f in sorted(Path(REF_DIR).glob("*/reference.json")):
         meta = json.loads(f.read_text())
-        entries.append(ref_entry(meta, cost.medium_summary(load_scene(meta["scene"])), cores_model))
+        scene = load_scene(meta["scene"])
+        summ = cost.medium_summary(scene)
+        entries.append(ref_entry(meta, summ, cores_model, todays_choice(scene, summ)))
     return entries
 
 
@@ -129,7 +144,10 @@ def validate(entries, family, cores_model):
         rows.append({"scene": e["scene"], "target": e["target"], "spp_measured": e["spp_total"],
                      "seconds_measured": e["wall"], "executor": e["executor"], "spp_in": spp_in, "seconds_in": s_in,
                      "spp_loo": spp_loo, "seconds_loo": s_loo, "factor_in": factor(s_in, e["wall"]),
-                     "factor_loo": factor(s_loo, e["wall"]), "spp_factor_loo": factor(spp_loo, e["spp_total"])})
+                     "factor_loo": factor(s_loo, e["wall"]), "spp_factor_loo": factor(spp_loo, e["spp_total"]),
+                     "per_spp_factor_loo": factor(s_loo / spp_loo, e["wall"] / e["spp_total"]),
+                     "pilot_factor": factor(e["pilot_predicted"], e["wall"]) if e["pilot_predicted"] else None,
+                     "integrator_changed": e["changed"]})
     return full, rows
 
 
@@ -160,11 +178,24 @@ def write_doc(rows, model, command, path=DOC):
              f"{model['time']['c_job']:.3g} s, per-render (kernel compilation) cost {model['time']['c_render']:.3g} s; noise model RMS {model['noise']['rms_log']:.2f} "
              f"(x{np.exp(model['noise']['rms_log']):.2f}), in-sample.", "",
              "| scene | target | measured spp | LOO spp | spp factor | measured s | LOO s | LOO factor "
-             "| in-sample s | in-sample factor |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| s/spp factor | in-sample s | in-sample factor | pilot's factor | rendered with other choices "
+             "than today's |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        pf = f"{r['pilot_factor']:+.1f}" if r.get("pilot_factor") else "not recorded"
         lines.append(f"| {r['scene']} | {r['target']:.1%} | {r['spp_measured']} | {r['spp_loo']} | "
                      f"{r['spp_factor_loo']:+.1f} | {r['seconds_measured']:.1f} | {r['seconds_loo']:.1f} | "
-                     f"{r['factor_loo']:+.1f} | {r['seconds_in']:.1f} | {r['factor_in']:+.1f} |")
+                     f"{r['factor_loo']:+.1f} | {r['per_spp_factor_loo']:+.1f} | {r['seconds_in']:.1f} | "
+                     f"{r['factor_in']:+.1f} | {pf} | {'yes' if r['integrator_changed'] else 'no'} |")
+    out = [r["scene"] for r in rows if abs(r["factor_loo"]) > 2]
+    lines += ["", f"Outside a factor of 2 (LOO): {', '.join(out) or 'none'}. The error splits into the noise "
+              "model's (spp factor) and the time model's (s/spp factor: seconds per sample, predicted over "
+              "measured). The last column flags references whose passes or Russian roulette depth differ "
+              "from what today's renderer chooses (one RGB pass where sigma_t differs between channels; "
+              "roulette from depth 5 at any albedo): their measured time is that of another integrator "
+              "than the one `--estimate` predicts today. The pilot's factor is the render's own "
+              "prediction after its pilot, where the reference records it (`pilot.predicted_wall_seconds`). "
+              "The references do not record the machine's load; on this shared 2-core machine it ranged "
+              "from about 2 to 19 and scales seconds, not samples."]
     lines += ["", "Coefficients (time: " + ", ".join(cost.TIME_TERMS) + "): "
               + ", ".join(f"{c:.3f}" for c in model["time"]["coef"]),
               "", "Coefficients (noise: " + ", ".join(cost.NOISE_TERMS) + "): "
