@@ -408,4 +408,12 @@ MUTATIONS = (
              ("tests/test_compare.py::test_render_then_compare_equals_the_sweep",),
              "compare: every pixel against a reference with its coverage beside it (the sweep compares only "
              "the fully covered ones)"),
+    Mutation("cost_drops_per_job_term", "mitsuba", "harness/reference/cost.py",
+             'final = K * per_seed * spp_s + c_job * K * rounds * row["passes"]', "final = K * per_seed * spp_s",
+             ("tests/test_reference_cost.py::test_prediction_adds_up_its_parts",),
+             "the reference cost model forgets the per-job cost of the final render's rounds"),
+    Mutation("cost_no_dielectric_factor", "mitsuba", "harness/reference/cost.py",
+             "np.asarray(mnee, np.float64), np.asarray(family", "0.0 * np.asarray(mnee, np.float64), np.asarray(family",
+             ("tests/test_reference_cost.py::test_committed_model_prices_the_dielectric_integrator_and_roulette",),
+             "the reference cost model prices mneevolpath (smooth dielectric) like volpath"),
 )
