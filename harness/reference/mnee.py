@@ -138,14 +138,20 @@ except RuntimeError:
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
+from harness.reference import mnee_chain as chain  # noqa: E402
+
 PLUGIN_NAME = "mneevolpath"
 DEFAULTS = {"max_depth": -1, "rr_depth": 5, "newton_iterations": 32, "newton_tolerance": 1e-5,
-            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0}
+            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0, "max_crossings": 5}
 MIN_STEP = 1e-4            # smallest Newton step factor beta before a walk is given up
 MIN_DET = 1e-12            # |det J| below this is treated as singular
 POSITION_EPS = 1e-6        # float32 error of a surface point's position (relative to max(|x1|, 1)), ~8 ulp
 PLANE_SWITCH = 0.05        # |C| above which a walk step solves the tangent-plane refraction instead
-STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected")
+STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected",
+              "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost",
+              "mnee_lost_r", "mnee_lost_g", "mnee_lost_b")
+#: Bins of :data:`STATS_AOVS`' crossing counts: 1, 3, 5 and 7 or more crossings of the seed segment.
+CROSSING_BINS = (1, 3, 5, 7)
 PROBE_AOVS = ("mnee_probe_rescued", "mnee_probe_missed_r", "mnee_probe_missed_g", "mnee_probe_missed_b")
 
 
@@ -280,7 +286,8 @@ class _Vertex:
                 mi.Vector3f(si.dp_dv), mi.Vector3f(si.dn_du), mi.Vector3f(si.dn_dv))
 
 
-WALK_FLAGS = mi.RayFlags.All | mi.RayFlags.dNSdUV
+WALK_FLAGS = chain.WALK_FLAGS
+MAX_SEGMENT_HITS = 64      # the straight seed segment is followed through at most this many surfaces
 
 
 # --------------------------------------------------------------------------- the integrator
@@ -311,6 +318,10 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         self.probe_seeds = int(get("probe_seeds"))
         if self.probe_seeds < 0 or (self.probe_seeds and not self.stats):
             raise ValueError(f"{PLUGIN_NAME}: probe_seeds = {self.probe_seeds} must be >= 0 and needs stats = true")
+        self.max_crossings = int(get("max_crossings"))
+        if not 1 <= self.max_crossings <= chain.MAX_CROSSINGS_LIMIT:
+            raise ValueError(f"{PLUGIN_NAME}: max_crossings = {self.max_crossings} must lie in "
+                             f"[1, {chain.MAX_CROSSINGS_LIMIT}]")
         self._eta_table = None
 
     def aov_names(self):
@@ -409,6 +420,45 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             ray[active] = si.spawn_ray(ray.d)
         return tr
 
+    @dr.syntax
+    def _straight_through(self, scene, sampler, ref, target, medium, shape_id, transmittance, active):
+        """Follow the straight seed segment ``ref -> target`` through every surface on it.
+
+        Returns ``(crossings, same_shape, tr)``: how many manifold-eligible dielectric
+        surfaces it crosses, whether all of them belong to ``shape_id``, and (where
+        ``transmittance``) the transmittance along it with every such dielectric treated as
+        index-matched (media ratio-tracked, other surfaces' null transmission): at eta ->
+        1 the straight segment is the exact connection, so ``I tr / r^2`` is the measured
+        estimate of the light a connection that is not made would carry.
+        """
+        active = mi.Bool(active)
+        medium = dr.select(active, medium, dr.zeros(mi.MediumPtr))
+        ray = ref.spawn_ray_to(target)
+        remaining = mi.Float(ray.maxt)
+        tr = mi.Spectrum(1.0)
+        crossings = mi.UInt32(0)
+        same = mi.Bool(True)
+        hits = mi.UInt32(0)
+        while dr.hint(active, label="mnee straight seed"):
+            ray.maxt = remaining
+            si = scene.ray_intersect(ray, mi.RayFlags.All, active)
+            hit = active & si.is_valid()
+            seg = dr.select(hit, si.t, remaining)
+            if transmittance:
+                tr[active] *= self._ratio_track(medium, ray.o, ray(seg), sampler, active)
+            dielectric = hit & (self._shape_eta(si.shape, hit) > 0)
+            crossings[dielectric] += 1
+            same[dielectric & (dr.reinterpret_array(mi.UInt32, si.shape) != shape_id)] = False
+            other = hit & ~dielectric
+            bsdf = si.bsdf(ray)
+            tr[other] *= bsdf.eval_null_transmission(si, other)
+            hits += 1
+            active = hit & (dielectric | dr.any(tr > 0.0)) & (hits < MAX_SEGMENT_HITS)
+            medium[active & si.is_medium_transition()] = si.target_medium(ray.d)
+            remaining -= seg
+            ray[active] = si.spawn_ray(ray.d)
+        return crossings, same, tr
+
     # ------------------------------------------------------------------ manifold walk
 
     @dr.syntax
@@ -501,17 +551,44 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         value = dr.select(conn, sel_weight * intensity * (1.0 - fresnel_r) * g * tr, 0.0)
         return converged, conn, value, omega, p
 
-    def _connect(self, scene, sampler, mei, medium, active, allow_manifold, phase_value):
+    def _chain_value(self, scene, sampler, x0, y, direction, eta, shape_id, k, emitter, u2, sel_weight, medium,
+                     active):
+        """A k-vertex chain (:mod:`harness.reference.mnee_chain`) from the straight seed, and its light at ``x0``.
+
+        Returns ``(connected, value, direction)``: ``value = I G prod(1 - F_i) prod Tr_j /
+        p_select`` (``mnee_chain`` docstring) along ``direction`` from ``x0``.
+        """
+        verts, dist, ok = chain.seed_chain(scene, x0, direction, k, shape_id, active)
+        conv, verts, omega, dist = chain.walk_chain(scene, x0, y, verts, direction, dist, eta, shape_id,
+                                                    self.newton_iterations, self.newton_tolerance, ok)
+        g, _, aux = chain.chain_geometry(omega, dist, verts, y, eta)
+        conn = conv & (g > 0)
+        it = dr.zeros(mi.Interaction3f)
+        it.p, it.n, it.t = verts[-1][0], verts[-1][2], 0.0
+        conn &= ~scene.ray_test(it.spawn_ray_to(y), conn)    # the last air segment (the others: the walk's casts)
+        ds1, em1 = emitter.sample_direction(it, u2, conn)
+        intensity = em1 * dr.square(ds1.dist)
+        tr = self._ratio_track(medium, x0, verts[0][0], sampler, conn)
+        for i in range(1, k - 1, 2):                          # inside the other parts: entry i -> exit i + 1
+            tr *= self._ratio_track(medium, verts[i][0], verts[i + 1][0], sampler, conn)
+        fresnel_t = chain.chain_fresnel(verts, aux, eta)
+        value = dr.select(conn, sel_weight * intensity * fresnel_t * g * tr, 0.0)
+        return conn, value, omega
+
+    def _connect(self, scene, sampler, mei, medium, active, depth, phase_value):
         """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
 
-        ``allow_manifold`` says where the two segments of a manifold connection still fit
-        into ``max_depth``; where they do not, an eligible vertex gets no connection at all
-        (a straight one would be blocked by the interface). ``phase_value(direction)`` is
+        A connection through k crossings adds k + 1 segments to the path's ``depth``; where
+        they do not fit into ``max_depth``, an eligible vertex gets no connection of that
+        length (a straight one would be blocked by the interface). ``phase_value(direction)`` is
         the phase function toward a direction (used by the probe seeds). Returns
         ``(value, direction, pdf, stats)``: the light arriving at ``mei`` along
         ``direction`` divided by its sampling density (times the phase function gives the
-        contribution), the solid-angle pdf used for MIS (0 for delta lights), and the
-        :data:`STATS_AOVS` of this vertex.
+        contribution), the solid-angle pdf used for MIS (0 for delta lights), the light and
+        direction of a chain through 3, 5, ... crossings (found where the seed segment
+        crosses that many times, up to ``max_crossings``; a second, distinct path, added to
+        the first), and the :data:`STATS_AOVS` of this vertex (counts, then the lost light
+        times the phase function).
         """
         idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
         emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
@@ -526,7 +603,7 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         si0 = scene.ray_intersect(seed_ray, WALK_FLAGS, active)
         eta = self._shape_eta(si0.shape, active & si0.is_valid())
         eligible = active & delta_pos & si0.is_valid() & (eta > 0) & (dr.dot(si0.n, ds.d) > 0)
-        manifold = eligible & allow_manifold
+        manifold = eligible & (depth + 1 < self.max_depth)
         straight = active & ~eligible
 
         # ---- straight connection (index-matched or open path): ratio-tracked shadow segment
@@ -542,11 +619,34 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         value[conn] = m_value
         direction[conn] = omega
         pdf[eligible] = 0.0
-        stats = [dr.select(manifold, 1.0, 0.0), dr.select(converged, 1.0, 0.0), dr.select(conn, 1.0, 0.0)]
+
+        # ---- chains: the seed segment leaves, re-enters and leaves again (k = 3, 5, ... crossings)
+        shape_id = dr.reinterpret_array(mi.UInt32, si0.shape)
+        crossings, same, tr_straight = self._straight_through(scene, sampler, mei, y, medium, shape_id, self.stats,
+                                                              manifold)
+        chain_value = mi.Spectrum(0.0)
+        chain_dir = mi.Vector3f(ds.d)
+        chain_conn = mi.Bool(False)
+        for k in range(3, self.max_crossings + 1, 2):
+            lane = manifold & same & (crossings == k) & (depth + k < self.max_depth)
+            conn_k, value_k, omega_k = self._chain_value(scene, sampler, mei.p, y, ds.d, eta, shape_id, k, emitter,
+                                                         u2, sel_weight, medium, lane)
+            chain_value[conn_k] = value_k
+            chain_dir[conn_k] = omega_k
+            chain_conn |= conn_k
+        stats = []
+        if self.stats:
+            lost = manifold & (crossings > 1) & ~chain_conn
+            lost_light = dr.select(lost, em_val * sel_weight * tr_straight * phase_value(ds.d, lost), 0.0)
+            bins = [crossings == b for b in CROSSING_BINS[:-1]] + [crossings >= CROSSING_BINS[-1]]
+            stats = ([dr.select(manifold, 1.0, 0.0), dr.select(converged, 1.0, 0.0), dr.select(conn, 1.0, 0.0)]
+                     + [dr.select(manifold & b, 1.0, 0.0) for b in bins]
+                     + [dr.select(chain_conn, 1.0, 0.0), dr.select(lost, 1.0, 0.0)]
+                     + [lost_light[0], lost_light[1], lost_light[2]])
         if self.probe_seeds:
             stats += self._probe(scene, sampler, mei.p, y, ds.d, eta, emitter, u2, sel_weight, medium, manifold,
                                  conn, x1, phase_value)
-        return value, direction, pdf, stats
+        return value, direction, pdf, (chain_value, chain_dir), stats
 
     def _probe(self, scene, sampler, x0, y, to_light, eta, emitter, u2, sel_weight, medium, active, conn, x1,
                phase_value):
@@ -642,16 +742,19 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             phase_ctx = mi.PhaseFunctionContext(sampler)
             phase = mei.medium.phase_function()
             nee = real & mei.medium.use_emitter_sampling()
-            # A manifold connection needs two more segments, a straight one one.
-            value, direction, nee_pdf, stats = self._connect(
-                scene, sampler, mei, medium, nee, depth + 1 < self.max_depth,
-                lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
-            # Per-vertex counts; the missed light of the probes (AOVs 4-6) carries the throughput.
-            weights = [1.0, 1.0, 1.0, 1.0, beta[0], beta[1], beta[2]]
-            for k in range(len(counters)):
-                counters[k] += dr.select(nee, stats[k] * weights[k], 0.0)
+            # A manifold connection through k crossings needs k + 1 more segments, a straight one one.
+            value, direction, nee_pdf, (chain_value, chain_dir), stats = self._connect(
+                scene, sampler, mei, medium, nee, depth, lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
+            # Per-vertex counts; the lost light and the probes' missed light (AOVs *_r, *_g, *_b)
+            # carry the throughput.
+            for k, name in enumerate(self.aov_names()):
+                weight = beta["rgb".index(name[-1])] if name[-2:] in ("_r", "_g", "_b") else 1.0
+                counters[k] += dr.select(nee, stats[k] * weight, 0.0)
             phase_val, phase_pdf = phase.eval_pdf(phase_ctx, mei, direction, nee)
             L[nee] += beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
+            chained = nee & dr.any(chain_value != 0.0)
+            phase_chain, _ = phase.eval_pdf(phase_ctx, mei, chain_dir, chained)
+            L[chained] += beta * phase_chain * chain_value
 
             # ---------------- phase-function sampling
             wo, phase_w, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(real), sampler.next_2d(real), real)
