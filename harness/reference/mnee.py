@@ -148,7 +148,7 @@ MIN_DET = 1e-12            # |det J| below this is treated as singular
 POSITION_EPS = 1e-6        # float32 error of a surface point's position (relative to max(|x1|, 1)), ~8 ulp
 PLANE_SWITCH = 0.05        # |C| above which a walk step solves the tangent-plane refraction instead
 STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected",
-              "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost",
+              "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost", "mnee_over_max",
               "mnee_lost_r", "mnee_lost_g", "mnee_lost_b")
 #: Bins of :data:`STATS_AOVS`' crossing counts: 1, 3, 5 and 7 or more crossings of the seed segment.
 CROSSING_BINS = (1, 3, 5, 7)
@@ -636,12 +636,15 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             chain_conn |= conn_k
         stats = []
         if self.stats:
-            lost = manifold & (crossings > 1) & ~chain_conn
+            # Not made although the path's length allows it: over max_crossings, another shape on
+            # the way, or a chain walk that failed (depth-limited vertices are not losses).
+            lost = manifold & (crossings > 1) & (depth + crossings < self.max_depth) & ~chain_conn
+            over = lost & (crossings > self.max_crossings)
             lost_light = dr.select(lost, em_val * sel_weight * tr_straight * phase_value(ds.d, lost), 0.0)
             bins = [crossings == b for b in CROSSING_BINS[:-1]] + [crossings >= CROSSING_BINS[-1]]
             stats = ([dr.select(manifold, 1.0, 0.0), dr.select(converged, 1.0, 0.0), dr.select(conn, 1.0, 0.0)]
                      + [dr.select(manifold & b, 1.0, 0.0) for b in bins]
-                     + [dr.select(chain_conn, 1.0, 0.0), dr.select(lost, 1.0, 0.0)]
+                     + [dr.select(chain_conn, 1.0, 0.0), dr.select(lost, 1.0, 0.0), dr.select(over, 1.0, 0.0)]
                      + [lost_light[0], lost_light[1], lost_light[2]])
         if self.probe_seeds:
             stats += self._probe(scene, sampler, mei.p, y, ds.d, eta, emitter, u2, sel_weight, medium, manifold,
