@@ -171,17 +171,17 @@ class TestChainMath:
 
 @pytest.mark.slow
 def test_eta_one_through_the_hole_reproduces_index_matched_volpath(mi):
-    """torus_hole at 20 x 20: eta = 1.0001 (mneevolpath, stats) against index-matched volpath, K = 8 x 32 spp each."""
+    """torus_hole at 20 x 20: eta = 1.0001 (mneevolpath, stats) against index-matched volpath, K = 16 x 16 spp each."""
     from harness.reference import nonconvex
 
     matched = nonconvex.torus_hole(1.0, size=20)
-    b = render_stack(mi, ms.build_scene_dict(matched), range(100, 108), 32)
+    b = render_stack(mi, ms.build_scene_dict(matched), range(100, 116), 16)
     covered = ms.coverage_mask(matched) >= 1.0
     results = {}
     for mc in (5, 1):
         d = ms.build_scene_dict(nonconvex.torus_hole(1.0001, size=20))
         d["integrator"].update(stats=True, max_crossings=mc)
-        a = render_stack(mi, d, range(8), 32)
+        a = render_stack(mi, d, range(16), 16)
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
         se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
         lit = covered & np.all(se > 0, axis=-1)

@@ -65,7 +65,7 @@ MIN_STEP = 1e-4            # smallest Newton step factor before a walk is given 
 POSITION_EPS = 1e-6        # float32 error of a surface point's position (relative to max(|x|, 1))
 #: Longest chain a scene may ask for (``[boundary] max_crossings``): each vertex adds a ray cast
 #: per Newton iteration and two 2 x 2 blocks to the elimination.
-MAX_CROSSINGS_LIMIT = 9
+from harness.scene.model import MAX_CROSSINGS_LIMIT  # noqa: E402, F401
 WALK_FLAGS = mi.RayFlags.All | mi.RayFlags.dNSdUV
 
 
