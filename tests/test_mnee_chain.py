@@ -267,3 +267,61 @@ def test_slab_scene_is_one_closed_shape():
     scene = halfspace.validation_scene(1.5, size=4, setup=halfspace.SLAB_SETUP)
     check_closed(scene.mesh.vertices, scene.mesh.faces)
     assert dataclasses.replace(scene, boundary=Boundary("index-matched")).mesh is scene.mesh
+
+
+# --------------------------------------------------------------------------- reporting what is lost
+
+class TestReporting:
+    @staticmethod
+    def losses(share, lost=0.1, over=0.05):
+        ch = {"lost_image_share": share, "lost": lost, "over_max": over}
+        return {"max_crossings": 5, "channels": {"R": dict(ch), "G": dict(ch, lost_image_share=share / 2),
+                                                 "B": dict(ch, lost_image_share=0.0)}}
+
+    def test_verdict_against_the_noise_target(self):
+        from harness.reference import losses
+
+        limit = losses.LOSS_FRACTION_OF_TARGET * 0.04
+        exact, note = losses.verdict(self.losses(0.99 * limit), 0.04)
+        assert exact and note.startswith("exact")
+        exact, note = losses.verdict(self.losses(1.01 * limit), 0.04)
+        assert not exact and "channel R" in note and "max_crossings = 5" in note
+
+    def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
+        import json
+
+        from harness.errors import InputError
+        from harness.reference import losses
+        from harness.runs.sweep import load_reference
+
+        monkeypatch.delenv(losses.ALLOW_ENV, raising=False)
+        (tmp_path / "reference.json").write_text(json.dumps({"exact": False, "exact_note": "not exact: because"}))
+        with pytest.raises(InputError) as err:
+            load_reference(tmp_path, (4, 4))
+        line = str(err.value)
+        assert "exact" in line and "not exact: because" in line and losses.ALLOW_ENV in line, line
+        monkeypatch.setenv(losses.ALLOW_ENV, "1")
+        losses.check_exact(tmp_path)                     # the opt-in: no refusal
+        (tmp_path / "reference.json").write_text(json.dumps({"exact": True}))
+        monkeypatch.delenv(losses.ALLOW_ENV)
+        losses.check_exact(tmp_path)
+
+    @pytest.mark.slow
+    def test_reference_records_losses_and_exactness(self, mi, tmp_path):
+        """torus_hole at 12 x 12: without chains the reference says it is not exact, with them it is exact."""
+        import json
+
+        from harness.reference import nonconvex
+        from harness.reference.render import render_reference
+        from harness.scene.load import scene_hash
+
+        base = nonconvex.torus_hole(1.4, size=12)
+        for mc, want in ((1, False), (5, True)):
+            scene = dataclasses.replace(base, boundary=dataclasses.replace(base.boundary, max_crossings=mc))
+            scene = dataclasses.replace(scene, content_hash=scene_hash(scene))
+            render_reference(scene, tmp_path / f"ref{mc}", spp=4, K=2)
+            meta = json.loads((tmp_path / f"ref{mc}" / "reference.json").read_text())
+            r = meta["mnee_losses"]["channels"]["R"]
+            print(f"max_crossings = {mc}: {meta['exact_note']}; crossings {r['crossings']}")
+            assert meta["exact"] is want, meta["exact_note"]
+            assert r["crossings"]["3"] > 0.1 and set(meta["mnee_losses"]["channels"]) == {"R", "G", "B"}
