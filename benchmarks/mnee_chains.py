@@ -12,7 +12,14 @@ Scenes (``--scene``): ``torus_hole`` (skin_torus_dielectric's torus and light, w
 passes through the near side of the ring to reach the far side, with a thin medium: sigma_t
 1.5 / 2 / 3, albedo 0.9 / 0.85 / 0.8), or any suite scene name.
 
-Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``.
+``--area-limit R``: instead, the area-light limit on the scene at eta 1.4 (``--eta``): stock
+``volpath`` with a sphere light of radius R (radiance I / (pi R^2)) at the point light's place,
+over the pixels where its absorber pass (albedo 0) shows no reflection of the bulb in the
+boundary (a point light has none), against ``mneevolpath`` with the point light (chains on and off), at
+``--max-depth``; prints the image mean ratios and their standard errors.
+
+Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
+``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``.
 """
 
 import argparse
@@ -49,8 +56,13 @@ def main():
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--max-crossings", type=int, nargs="+", default=[1, 5])
     ap.add_argument("--eta", type=float, default=1.0001)
+    ap.add_argument("--area-limit", type=float, default=None, metavar="R")
+    ap.add_argument("--max-depth", type=int, default=-1)
+    ap.add_argument("--area-spp", type=int, default=16384)
     args = ap.parse_args()
     mi = ms.use_variant("llvm_ad_rgb")
+    if args.area_limit is not None:
+        return area_limit(mi, args)
     from harness.reference import mnee
 
     base = scene_named(args.scene).with_resolution(args.size, args.size)
@@ -83,6 +95,43 @@ def main():
               f"{st['mnee_chain_connected'] / started:.4f}, lost {st['mnee_lost'] / started:.4f} (over the maximum "
               f"{over:.4f}); lost light "
               f"(straight, index-matched) / image {fmt(lost)}")
+
+
+def area_limit(mi, args):
+    r, md = args.area_limit, args.max_depth
+    scene = dataclasses.replace(scene_named(args.scene).with_resolution(args.size, args.size),
+                                boundary=Boundary("dielectric", args.eta, 0.0))
+    light = scene.lights[0]
+    print(f"area-light limit, {args.scene} at {args.size} x {args.size}, eta {args.eta}, max_depth {md}, "
+          f"sphere light r = {r}: K = {args.seeds} x {args.area_spp} spp (full and absorber), point K = "
+          f"{args.seeds} x {args.spp}")
+    intensity = np.asarray(light.intensity, float)
+    bulb = {"type": "sphere", "center": [float(c) for c in light.position], "radius": r,
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (intensity / (np.pi * r * r)).tolist()}}}
+    seeds = range(100, 100 + args.seeds)
+    full, tf = render(mi, ms.build_scene_dict(scene, lights=False, extra_emitters={"bulb": bulb}, sample_emitters=False,
+                                              integrator={"type": "volpath", "max_depth": md}), seeds, args.area_spp)
+    absorber, ta = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, lights=False,
+                                                  extra_emitters={"bulb": bulb}, sample_emitters=False,
+                                                  integrator={"type": "volpath", "max_depth": md}),
+                          range(200, 200 + args.seeds), args.area_spp)
+    # Pixels where the bulb's reflection shows (in any channel, in the absorber image) are left out, so
+    # that its noise does not swamp the comparison; the rest are compared as they are.
+    keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
+    f, a = full[:, keep].mean(1), absorber.mean((1, 2))
+    area = f.mean(0)
+    var_area = f.var(0, ddof=1) / len(f)
+    print(f"  volpath, sphere light: {tf + ta:.0f} s; reflection of the bulb {fmt(a.mean(0) / full.mean((0, 1, 2)))} "
+          f"of the full image, {int((~keep).sum())} of {keep.size} pixels left out for it; subsurface {fmt(area, 6)}")
+    for mc in args.max_crossings:
+        d = ms.build_scene_dict(scene, max_depth=md)
+        d["integrator"]["max_crossings"] = mc
+        p, tp = render(mi, d, range(args.seeds), args.spp)
+        p = p[:, keep].mean(1)
+        ratio = area / p.mean(0)
+        se = ratio * np.sqrt(var_area / area ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
+        print(f"  mneevolpath, point light, max_crossings = {mc}: {tp:.0f} s; sphere / point {fmt(ratio)} "
+              f"+- {fmt(se)}")
 
 
 if __name__ == "__main__":

@@ -29,11 +29,19 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - Ratio tracking of the transmittance from a medium vertex to the interface uses
        this multiple of the medium's majorant (>= 1). Larger values cost more lookups and
        give less noise; 1 makes the estimate binary in a constant medium. Default: 2
+   * - max_crossings
+     - |int|
+     - Longest chain of refractions a connection follows (1, 3, 5, ... crossings of the
+       boundary along the seed segment; 1 is a single refraction), 1 to 9. Default: 5
    * - stats
      - |bool|
-     - Add three AOV channels per pixel: manifold walks started, walks converged, walks
-       converged into a visible, transmissive connection (sums over the path's vertices,
-       averaged over samples). Default: false
+     - Add AOV channels per pixel (sums over the path's vertices, averaged over samples,
+       :data:`STATS_AOVS`): manifold walks started, walks converged, walks converged into a
+       visible, transmissive connection; connections whose seed segment crosses the
+       boundary 1, 3, 5, >= 7 times; chains connected; connections lost (not made although
+       the path's length allows them) and of those over ``max_crossings``; and the RGB
+       light of the lost ones, estimated by their straight seed with every dielectric
+       index-matched (exact at eta -> 1), times the path's throughput. Default: false
    * - probe_seeds
      - |int|
      - Diagnostics (with ``stats``): after each walk, this many more walks from random
@@ -83,15 +91,27 @@ estimation (Hanika, Droske and Fascione, "Manifold Next Event Estimation", EGSR 
    formula the ``dielectric`` BSDF uses) and the light's intensity toward ``x1``.
 5. **Transmittance** from ``x0`` to ``x1`` by ratio tracking (analytic in a
    ``homogeneous`` medium); the segment ``x1 -> y`` must be unoccluded (``ray_test``).
+6. **Chains** (issue 26): where the straight seed segment crosses the same shape's boundary
+   k = 3, 5, ... <= ``max_crossings`` times (it leaves the object, crosses air, enters
+   another part and leaves again), a second walk moves all k crossings at once on the
+   block-tridiagonal constraint of Hanika et al. Sec. 4 (:mod:`harness.reference.mnee_chain`:
+   Fresnel at every vertex, ratio tracking through every medium segment, the air segments
+   unoccluded, the geometry term from the first block of ``(dC/dX)^-1 dC/dy``). Its light
+   is added to that of the single-refraction walk: the two are distinct paths.
 
 What is not covered, and how it is handled
 ------------------------------------------
-* **Connections that cross the interface more than once** (light that leaves a concave
-  object and re-enters it, or passes through another part of it): the walk finds a
-  single-refraction path or none; when the segment ``x1 -> y`` is occluded the
-  connection contributes nothing. Such light still arrives by path tracing when the path
-  scatters in the other part first; only the unscattered transmission through the other
-  part is lost.
+* **Connections through more crossings than** ``max_crossings``, through another shape,
+  or whose chain walk fails: not made; counted and their light estimated with ``stats``
+  (:mod:`harness.reference.losses` records both in ``reference.json`` and marks a reference
+  whose estimated loss exceeds a quarter of its noise target as not exact). Measured on the
+  torus lit through its hole (``benchmarks/mnee_chains.py``, thin medium, eta = 1.0001): a
+  fifth of the connections cross three times; without chains the image is 5-8 % dark,
+  as much as their estimated light; with chains it agrees with index-matched ``volpath``.
+* **Specular chains with a reflection**: light that reaches ``x0`` after a reflection at
+  the boundary (inside or outside) followed by refractions toward the light is not
+  connected; on a flat interface none exists, on a curved one it is lost (see the
+  area-light figures of ``benchmarks/mnee_chains.py --area-limit``).
 * **A constraint with several solutions** (near caustics of the interface): the walk
   finds the solution its seed leads to and the others are lost.
 * **Walks that fail** (no convergence in ``newton_iterations``, a step below 1e-4, a
