@@ -44,6 +44,13 @@ def render(mi, d, seeds, spp):
     return out, time.perf_counter() - t
 
 
+def median_rel_se(stack, covered):
+    """Median over covered, lit (pixel, channel) pairs of se / mean (K seeds)."""
+    mean, se = stack.mean(0), stack.std(0, ddof=1) / np.sqrt(len(stack))
+    lit = covered[..., None] & (mean > 0)
+    return float(np.median(se[lit] / mean[lit]))
+
+
 def fmt(a, digits=4):
     return "[" + ", ".join(f"{v:.{digits}f}" for v in np.ravel(a)) + "]"
 
@@ -55,7 +62,7 @@ def main():
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--max-crossings", type=int, nargs="+", default=[1, 5])
-    ap.add_argument("--eta", type=float, default=1.0001)
+    ap.add_argument("--eta", default="1.0001", help="the boundary's index, or 'own' (the scene's)")
     ap.add_argument("--area-limit", type=float, default=None, metavar="R")
     ap.add_argument("--max-depth", type=int, default=-1)
     ap.add_argument("--area-spp", type=int, default=16384)
@@ -67,11 +74,14 @@ def main():
 
     base = scene_named(args.scene).with_resolution(args.size, args.size)
     matched = dataclasses.replace(base, boundary=Boundary("index-matched"))
-    smooth = dataclasses.replace(base, boundary=Boundary("dielectric", args.eta, 0.0))
-    print(f"{args.scene} at {args.size} x {args.size}, K = {args.seeds} x {args.spp} spp each, eta = {args.eta}")
+    eta = base.boundary.eta if args.eta == "own" else float(args.eta)
+    smooth = dataclasses.replace(base, boundary=Boundary("dielectric", eta, 0.0))
+    print(f"{args.scene} at {args.size} x {args.size}, K = {args.seeds} x {args.spp} spp each, eta = {eta}")
     b, tb = render(mi, ms.build_scene_dict(matched), range(100, 100 + args.seeds), args.spp)
     pb = b.mean((1, 2))
-    print(f"  index-matched volpath: {tb:.0f} s, image mean {fmt(pb.mean(0))}")
+    covered = ms.coverage_mask(matched) >= 1.0
+    rb = median_rel_se(b, covered)
+    print(f"  index-matched volpath: {tb:.0f} s, image mean {fmt(pb.mean(0))}, median rel. SE {rb:.4f}")
     names = ["R", "G", "B"] + list(mnee.STATS_AOVS)
     for mc in args.max_crossings:
         d = ms.build_scene_dict(smooth)
@@ -88,7 +98,10 @@ def main():
         cross = [st[k] / started for k in ("mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more")]
         over = st["mnee_over_max"] / started
         lost = np.array([st["mnee_lost_r"], st["mnee_lost_g"], st["mnee_lost_b"]]) / (pb.mean(0) * args.size ** 2)
-        print(f"  max_crossings = {mc}: {ta:.0f} s ({ta / tb:.2f} x index-matched); image mean ratio "
+        ra = median_rel_se(img, covered)
+        # Time to a noise target T = t (r / target)^2 for both, in one run: their ratio.
+        print(f"  max_crossings = {mc}: {ta:.0f} s ({ta / tb:.2f} x index-matched), median rel. SE {ra:.4f}: time to "
+              f"the same noise {ta * ra ** 2 / (tb * rb ** 2):.2f} x index-matched; image mean ratio "
               f"{fmt(pa.mean(0) / pb.mean(0))}, (difference) / SE {fmt((pa.mean(0) - pb.mean(0)) / se_m, 2)}; "
               f"pixels within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f}, mean z {fmt(z.mean(0), 2)}")
         print(f"    connections by crossings of the seed segment (1, 3, 5, >= 7): {fmt(cross)}; chains connected "
@@ -100,7 +113,7 @@ def main():
 def area_limit(mi, args):
     r, md = args.area_limit, args.max_depth
     scene = dataclasses.replace(scene_named(args.scene).with_resolution(args.size, args.size),
-                                boundary=Boundary("dielectric", args.eta, 0.0))
+                                boundary=Boundary("dielectric", float(args.eta), 0.0))
     light = scene.lights[0]
     print(f"area-light limit, {args.scene} at {args.size} x {args.size}, eta {args.eta}, max_depth {md}, "
           f"sphere light r = {r}: K = {args.seeds} x {args.area_spp} spp (full and absorber), point K = "
