@@ -310,8 +310,10 @@ class ManifoldConnections(mi.SamplingIntegrator):
 
         # ---- chains: the seed segment leaves, re-enters and leaves again (k = 3, 5, ... crossings)
         shape_id = dr.reinterpret_array(mi.UInt32, si0.shape)
+        # Without chains and statistics nothing needs the crossings: the seed segment is not followed.
+        follow = manifold if (self.max_crossings > 1 or self.stats) else mi.Bool(False)
         crossings, same, tr_straight = self._straight_through(scene, sampler, mei, y, medium, shape_id, self.stats,
-                                                              manifold)
+                                                              follow)
         chain_value = mi.Spectrum(0.0)
         chain_dir = mi.Vector3f(ds.d)
         chain_conn = mi.Bool(False)
