@@ -171,17 +171,21 @@ class TestChainMath:
 
 @pytest.mark.slow
 def test_eta_one_through_the_hole_reproduces_index_matched_volpath(mi):
-    """torus_hole at 20 x 20: eta = 1.0001 (mneevolpath, stats) against index-matched volpath, K = 16 x 16 spp each."""
+    """torus_hole at 32 x 32: eta = 1.0001 (mneevolpath, stats) against index-matched volpath, K = 8 x 64 spp each.
+
+    32 x 32 gives about 420 covered pixels (at 20 x 20, 106: one pixel in the heavy tail of
+    a 16-spp seed already decides the 99 % criterion).
+    """
     from harness.reference import nonconvex
 
-    matched = nonconvex.torus_hole(1.0, size=20)
-    b = render_stack(mi, ms.build_scene_dict(matched), range(100, 116), 16)
+    matched = nonconvex.torus_hole(1.0, size=32)
+    b = render_stack(mi, ms.build_scene_dict(matched), range(100, 108), 64)
     covered = ms.coverage_mask(matched) >= 1.0
     results = {}
     for mc in (5, 1):
-        d = ms.build_scene_dict(nonconvex.torus_hole(1.0001, size=20))
+        d = ms.build_scene_dict(nonconvex.torus_hole(1.0001, size=32))
         d["integrator"].update(stats=True, max_crossings=mc)
-        a = render_stack(mi, d, range(16), 16)
+        a = render_stack(mi, d, range(8), 64)
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
         se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
         lit = covered & np.all(se > 0, axis=-1)
@@ -308,7 +312,7 @@ class TestReporting:
 
     @pytest.mark.slow
     def test_reference_records_losses_and_exactness(self, mi, tmp_path):
-        """torus_hole at 12 x 12: without chains the reference says it is not exact, with them it is exact."""
+        """torus_hole (grey: one pass) at 12 x 12: without chains the reference says it is not exact, with them exact."""
         import json
 
         from harness.reference import nonconvex
@@ -316,6 +320,8 @@ class TestReporting:
         from harness.scene.load import scene_hash
 
         base = nonconvex.torus_hole(1.4, size=12)
+        grey = np.ones_like(base.medium.sigma_t)
+        base = base.with_medium(sigma_t=2.0 * grey, albedo=0.85 * grey)
         for mc, want in ((1, False), (5, True)):
             scene = dataclasses.replace(base, boundary=dataclasses.replace(base.boundary, max_crossings=mc))
             scene = dataclasses.replace(scene, content_hash=scene_hash(scene))
@@ -325,3 +331,4 @@ class TestReporting:
             print(f"max_crossings = {mc}: {meta['exact_note']}; crossings {r['crossings']}")
             assert meta["exact"] is want, meta["exact_note"]
             assert r["crossings"]["3"] > 0.1 and set(meta["mnee_losses"]["channels"]) == {"R", "G", "B"}
+            assert meta["mnee_losses"]["channels"]["G"]["lost_image_share"] > 0
