@@ -196,6 +196,11 @@ SCENE_CASES = [
     ("roughness-above-one", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4).replace("0.0", "1.5")),
      "boundary.roughness", "[0, 1]"),
     ("eta-string", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta='"glass"')), "boundary.eta", "must be a number"),
+    # the longest chain of refractions of the exact reference (issue 26)
+    ("max-crossings-zero", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nmax_crossings = 0"),
+     "boundary.max_crossings", "must be an integer in [1, 9], got 0"),
+    ("max-crossings-above-limit", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nmax_crossings = 10"),
+     "boundary.max_crossings", "must be an integer in [1, 9], got 10"),
 ]
 
 

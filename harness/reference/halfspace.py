@@ -28,6 +28,19 @@ and horizontal distance ``rho`` from the light's foot:
 * ``p`` is Henyey-Greenstein with the cosine between the light's direction of travel at
   ``x(s)`` and ``-d_t`` (toward the camera).
 
+**A slab above the half-space** (the chain of three interfaces, issue 26): a layer of the
+same medium between heights ``a`` and ``a + b`` (``0 < a``, ``a + b < h``) with air on both
+sides. The light's path leaves the slab's top, crosses it, leaves its bottom, crosses the
+air gap and enters the half-space, and every interface is parallel, so the angles in the
+medium (``th_i``) and in the air (``th_o``) are the same at all three: the horizontal
+distance is ``rho = (z + b) tan(th_i) + (h - b) tan(th_o)``, the path inside the medium
+``(z + b) / cos(th_i)``, the Fresnel transmittance ``T(cos th_o)^3``, and the ray tube's
+irradiance is the half-space's with ``z -> z + b`` and ``h -> h - b`` (the tube spreads
+according to the length travelled in each medium only). The slab covers only part of the
+plane (:data:`SLAB_SETUP`); :func:`slab_outside_share` says how much of the integral's
+weight has its chain outside it (it must be negligible for the comparison to hold).
+Internal reflections inside the slab are left out, as they are by ``mneevolpath``.
+
 The integral over ``s`` is Gauss-Legendre in ``u = 1 - exp(-sigma_ref s)``; pixels are
 averaged over ``sub x sub`` stratified rays (box filter, as the reference's film).
 :func:`image` has switches that plant the errors the validation test must catch.
@@ -39,7 +52,7 @@ import numpy as np
 
 from harness.reference.mitsuba_scene import camera_rays
 from harness.scene import Boundary, Camera, Medium, PointLight, Scene, scene_hash
-from harness.scene.geometry import BoxMesh, build_mesh
+from harness.scene.geometry import BoxMesh, Mesh, build_mesh
 
 #: The validation setup: a camera looking down at the interface y = 0 at about 40 degrees, a
 #: point light to the back left, a chromatic medium (sigma_t per colour, HG g = 0.3). The
@@ -51,6 +64,19 @@ SETUP = {"origin": (0.0, 1.5, 1.8), "target": (0.0, 0.0, 0.0), "fov_y": 40.0,
          "half_width": 6.0, "depth": 4.0}
 
 
+#: The slab validation (three interfaces): the light moved up and toward the camera's side, a slab
+#: of the same medium between y = 2.0 and 2.5 over z in [0, 6] (the camera at y = 1.5 below it
+#: sees only the half-space; the camera rays the half-space reflects rise toward z < -0.2 and miss
+#: it), brighter for the longer way.
+SLAB_SETUP = dict(SETUP, light=(-1.2, 3.2, 3.0), intensity=(24.0, 24.0, 24.0), slab=(2.0, 0.5, 0.0, 6.0))
+
+
+def _slab_box(setup):
+    a, b, z0, z1 = setup["slab"]
+    w = setup["half_width"]
+    return build_mesh(BoxMesh(kind="box", size=[2 * w, b, z1 - z0], center=[0.0, a + b / 2, (z0 + z1) / 2]), None)
+
+
 def validation_scene(eta, size=24, setup=SETUP):
     """The :data:`SETUP` half-space as a harness :class:`~harness.scene.Scene` behind a smooth dielectric.
 
@@ -60,6 +86,11 @@ def validation_scene(eta, size=24, setup=SETUP):
     """
     w, depth = setup["half_width"], setup["depth"]
     mesh = build_mesh(BoxMesh(kind="box", size=[2 * w, depth, 2 * w], center=[0.0, -depth / 2, 0.0]), None)
+    if "slab" in setup:       # one closed mesh of two components: one shape, one medium
+        slab = _slab_box(setup)
+        mesh = Mesh(np.concatenate([mesh.vertices, slab.vertices]),
+                    np.concatenate([mesh.faces, slab.faces + len(mesh.vertices)]).astype(np.int32),
+                    np.concatenate([mesh.normals, slab.normals]))
     cam = Camera(origin=setup["origin"], target=setup["target"], up=(0.0, 1.0, 0.0), fov_y_deg=setup["fov_y"],
                  width=int(size), height=int(size))
 
@@ -75,9 +106,11 @@ def validation_scene(eta, size=24, setup=SETUP):
     return dataclasses.replace(scene, content_hash=scene_hash(scene))
 
 
-def setup_image(scene, **kwargs):
-    """:func:`image` of a :func:`validation_scene` (its camera, light, eta and medium)."""
+def setup_image(scene, setup=SETUP, **kwargs):
+    """:func:`image` of a :func:`validation_scene` (its camera, light, eta and medium; ``setup``'s slab)."""
     m, light = scene.medium, scene.lights[0]
+    if "slab" in setup:
+        kwargs.setdefault("slab", setup["slab"][:2])
     return image(scene.camera, light.position, light.intensity, scene.boundary.eta, m.sigma_t[0, 0, 0],
                  m.albedo[0, 0, 0], float(m.g[0, 0, 0, 0]), **kwargs)
 
@@ -119,12 +152,15 @@ def refraction_angle(rho, z, h, eta, iterations=24):
 
 
 def image(camera, light_pos, intensity, eta, sigma_t, albedo, g, sub=8, nodes=96, fresnel_light=True,
-          geometry="tube", chunk=4096):
+          geometry="tube", chunk=4096, slab=None, fresnel_count=None):
     """Single-scattering image (H, W, 3) of the half-space ``y < 0`` (see the module docstring).
 
-    ``fresnel_light=False`` drops the Fresnel factor at the light's refraction and
-    ``geometry="straight"`` replaces the irradiance of the refracted ray tube by the
-    inverse square of the straight distance to the light: the planted errors of the test.
+    ``slab = (a, b)`` adds the slab between heights ``a`` and ``a + b`` (three interfaces).
+    ``fresnel_light=False`` drops the Fresnel factor at the light's refraction,
+    ``fresnel_count`` sets how many Fresnel factors the light's path gets (default 1, or 3
+    with a slab) and ``geometry="straight"`` replaces the irradiance of the refracted ray
+    tube by the inverse square of the straight distance to the light: the planted errors of
+    the tests.
     """
     sigma_t = np.asarray(sigma_t, float)
     albedo = np.asarray(albedo, float)
@@ -133,6 +169,11 @@ def image(camera, light_pos, intensity, eta, sigma_t, albedo, g, sub=8, nodes=96
     h = light[1]
     if h <= 0:
         raise ValueError("halfspace.image: the light must lie above the interface (y > 0)")
+    b = 0.0 if slab is None else float(slab[1])
+    if slab is not None and not (0 < slab[0] and slab[0] + b < h):
+        raise ValueError("halfspace.image: the slab must lie between the interface and the light")
+    if fresnel_count is None:
+        fresnel_count = 1 if slab is None else 3
     grid = (np.arange(sub) + 0.5) / sub
     offsets = np.stack(np.meshgrid(grid, grid, indexing="xy"), -1).reshape(-1, 2)
     o, d = camera_rays(camera, offsets)                        # (H, W, S, 3)
@@ -159,16 +200,20 @@ def image(camera, light_pos, intensity, eta, sigma_t, albedo, g, sub=8, nodes=96
     for lo in range(0, len(d), chunk):                          # bounded memory: rays in chunks
         sl = slice(lo, lo + chunk)
         L[sl] = _along_rays(p_hit[sl], d_t[sl], s, ds_du * wu, light, h, eta, sigma_t, albedo, g, intensity,
-                            fresnel_light, geometry)
+                            fresnel_light, geometry, b, fresnel_count)
     L *= (fresnel_transmittance(cos_c, eta) / eta ** 2)[:, None]
     L[~down] = 0.0
     return L.reshape(H, W, S, 3).mean(axis=2)
 
 
-def _along_rays(p_hit, d_t, s, weights, light, h, eta, sigma_t, albedo, g, intensity, fresnel_light, geometry):
-    """The integral over s of the in-scattered light for refracted rays ``p_hit + s d_t`` (R, 3) -> (R, 3)."""
+def _along_rays(p_hit, d_t, s, weights, light, h, eta, sigma_t, albedo, g, intensity, fresnel_light, geometry,
+                b=0.0, fresnel_count=1):
+    """The integral over s of the in-scattered light for refracted rays ``p_hit + s d_t`` (R, 3) -> (R, 3).
+
+    ``b``: the slab's thickness (the chain through three interfaces: ``z -> z + b``, ``h -> h - b``)."""
     x = p_hit[:, None, :] + s[None, :, None] * d_t[:, None, :]  # (R, N, 3)
-    z = -x[..., 1]
+    z = -x[..., 1] + b
+    h = h - b
     foot = x[..., [0, 2]] - light[[0, 2]]
     rho = np.linalg.norm(foot, axis=-1)
     th_i = refraction_angle(rho, z, h, eta)
@@ -188,10 +233,49 @@ def _along_rays(p_hit, d_t, s, weights, light, h, eta, sigma_t, albedo, g, inten
     travel = np.stack([sin_i * e_h[..., 0], -cos_i, sin_i * e_h[..., 1]], axis=-1)
     cos_phase = np.einsum("rnk,rk->rn", travel, -d_t)
     phase = henyey_greenstein(cos_phase, g)
-    t_light = fresnel_transmittance(cos_o, eta) if fresnel_light else np.ones_like(cos_o)
+    t_light = fresnel_transmittance(cos_o, eta) ** fresnel_count if fresnel_light else np.ones_like(cos_o)
     geo = phase * t_light * e_perp * weights[None, :]           # (R, N)
     out = np.empty((len(p_hit), 3))
     for c in range(3):
         att = np.exp(-sigma_t[c] * (s[None, :] + path_in))
         out[:, c] = (geo * att).sum(axis=1) * sigma_t[c] * albedo[c] * intensity[c]
     return out
+
+
+def slab_outside_share(scene, setup=SLAB_SETUP, sub=2, nodes=32):
+    """Share of the single-scattering integral whose chain crosses the slab's planes outside its footprint.
+
+    The crossing of the slab's bottom at height ``a`` lies ``z tan(th_i) + a tan(th_o)``
+    from ``x(s)`` toward the light's foot (and its top farther on); a chain outside the slab's
+    ``z`` range (``SLAB_SETUP["slab"][2:]``) is not the three-interface chain of :func:`image`.
+    Weighted by the attenuation of the first channel.
+    """
+    a, b, z0, z1 = setup["slab"]
+    light = np.asarray(setup["light"], float)
+    eta = scene.boundary.eta
+    grid = (np.arange(sub) + 0.5) / sub
+    o, d = camera_rays(scene.camera, np.stack(np.meshgrid(grid, grid, indexing="xy"), -1).reshape(-1, 2))
+    d = d.reshape(-1, 3)
+    d = d[d[:, 1] < 0]
+    p = o + (-o[1] / d[:, 1])[:, None] * d
+    cos_c = -d[:, 1]
+    cos_t = np.sqrt(1.0 - (1.0 - cos_c ** 2) / eta ** 2)
+    d_t = d / eta
+    d_t[:, 1] += cos_c / eta - cos_t
+    d_t /= np.linalg.norm(d_t, axis=1, keepdims=True)
+    st = float(np.min(setup["sigma_t"]))
+    u = (np.arange(nodes) + 0.5) / nodes
+    s = -np.log1p(-u) / st
+    x = p[:, None, :] + s[None, :, None] * d_t[:, None, :]
+    z = -x[..., 1]
+    foot = x[..., [0, 2]] - light[[0, 2]]
+    rho = np.linalg.norm(foot, axis=-1)
+    th_i = refraction_angle(rho, z + b, light[1] - b, eta)
+    th_o = np.arcsin(eta * np.sin(th_i))
+    toward = -foot / np.maximum(rho, 1e-300)[..., None]
+    out = np.zeros(z.shape, bool)
+    for run in (z * np.tan(th_i) + a * np.tan(th_o), (z + b) * np.tan(th_i) + a * np.tan(th_o)):
+        zc = x[..., 2] + toward[..., 1] * run
+        out |= (zc < z0) | (zc > z1)
+    w = np.exp(-st * (z + b) / np.cos(th_i))
+    return float((w * out).sum() / w.sum())

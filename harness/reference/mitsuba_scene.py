@@ -325,7 +325,7 @@ def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEP
         rr_depth = rr_depth_for(a)
     d = {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
     if smooth_dielectric(scene.boundary):
-        d = {**d, "type": "mneevolpath", **MNEE_PARAMS}
+        d = {**d, "type": "mneevolpath", **MNEE_PARAMS, "max_crossings": int(scene.boundary.max_crossings)}
     return d
 
 

@@ -29,11 +29,19 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - Ratio tracking of the transmittance from a medium vertex to the interface uses
        this multiple of the medium's majorant (>= 1). Larger values cost more lookups and
        give less noise; 1 makes the estimate binary in a constant medium. Default: 2
+   * - max_crossings
+     - |int|
+     - Longest chain of refractions a connection follows (1, 3, 5, ... crossings of the
+       boundary along the seed segment; 1 is a single refraction), 1 to 9. Default: 5
    * - stats
      - |bool|
-     - Add three AOV channels per pixel: manifold walks started, walks converged, walks
-       converged into a visible, transmissive connection (sums over the path's vertices,
-       averaged over samples). Default: false
+     - Add AOV channels per pixel (sums over the path's vertices, averaged over samples,
+       :data:`STATS_AOVS`): manifold walks started, walks converged, walks converged into a
+       visible, transmissive connection; connections whose seed segment crosses the
+       boundary 1, 3, 5, >= 7 times; chains connected; connections lost (not made although
+       the path's length allows them) and of those over ``max_crossings``; and the RGB
+       light of the lost ones, estimated by their straight seed with every dielectric
+       index-matched (exact at eta -> 1), times the path's throughput. Default: false
    * - probe_seeds
      - |int|
      - Diagnostics (with ``stats``): after each walk, this many more walks from random
@@ -83,15 +91,27 @@ estimation (Hanika, Droske and Fascione, "Manifold Next Event Estimation", EGSR 
    formula the ``dielectric`` BSDF uses) and the light's intensity toward ``x1``.
 5. **Transmittance** from ``x0`` to ``x1`` by ratio tracking (analytic in a
    ``homogeneous`` medium); the segment ``x1 -> y`` must be unoccluded (``ray_test``).
+6. **Chains** (issue 26): where the straight seed segment crosses the same shape's boundary
+   k = 3, 5, ... <= ``max_crossings`` times (it leaves the object, crosses air, enters
+   another part and leaves again), a second walk moves all k crossings at once on the
+   block-tridiagonal constraint of Hanika et al. Sec. 4 (:mod:`harness.reference.mnee_chain`:
+   Fresnel at every vertex, ratio tracking through every medium segment, the air segments
+   unoccluded, the geometry term from the first block of ``(dC/dX)^-1 dC/dy``). Its light
+   is added to that of the single-refraction walk: the two are distinct paths.
 
 What is not covered, and how it is handled
 ------------------------------------------
-* **Connections that cross the interface more than once** (light that leaves a concave
-  object and re-enters it, or passes through another part of it): the walk finds a
-  single-refraction path or none; when the segment ``x1 -> y`` is occluded the
-  connection contributes nothing. Such light still arrives by path tracing when the path
-  scatters in the other part first; only the unscattered transmission through the other
-  part is lost.
+* **Connections through more crossings than** ``max_crossings``, through another shape,
+  or whose chain walk fails: not made; counted and their light estimated with ``stats``
+  (:mod:`harness.reference.losses` records both in ``reference.json`` and marks a reference
+  whose estimated loss exceeds a quarter of its noise target as not exact). Measured on the
+  torus lit through its hole (``benchmarks/mnee_chains.py``, thin medium, eta = 1.0001): a
+  fifth of the connections cross three times; without chains the image is 5-8 % dark,
+  as much as their estimated light; with chains it agrees with index-matched ``volpath``.
+* **Specular chains with a reflection**: light that reaches ``x0`` after a reflection at
+  the boundary (inside or outside) followed by refractions toward the light is not
+  connected; on a flat interface none exists, on a curved one it is lost (see the
+  area-light figures of ``benchmarks/mnee_chains.py --area-limit``).
 * **A constraint with several solutions** (near caustics of the interface): the walk
   finds the solution its seed leads to and the others are lost.
 * **Walks that fail** (no convergence in ``newton_iterations``, a step below 1e-4, a
@@ -138,125 +158,20 @@ except RuntimeError:
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
+from harness.reference import mnee_chain as chain  # noqa: E402
+from harness.reference.mnee_connect import (  # noqa: E402, F401 (the walk's names, re-exported)
+    CROSSING_BINS, MAX_SEGMENT_HITS, MIN_STEP, WALK_FLAGS, ManifoldConnections)
+from harness.reference.mnee_vertex import (  # noqa: E402, F401
+    MIN_DET, PLANE_SWITCH, POSITION_EPS, generalized_geometry, half_vector_constraint, light_derivative_det,
+    plane_refraction_point)
+
 PLUGIN_NAME = "mneevolpath"
 DEFAULTS = {"max_depth": -1, "rr_depth": 5, "newton_iterations": 32, "newton_tolerance": 1e-5,
-            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0}
-MIN_STEP = 1e-4            # smallest Newton step factor beta before a walk is given up
-MIN_DET = 1e-12            # |det J| below this is treated as singular
-POSITION_EPS = 1e-6        # float32 error of a surface point's position (relative to max(|x1|, 1)), ~8 ulp
-PLANE_SWITCH = 0.05        # |C| above which a walk step solves the tangent-plane refraction instead
-STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected")
+            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0, "max_crossings": 5}
+STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected",
+              "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost", "mnee_over_max",
+              "mnee_lost_r", "mnee_lost_g", "mnee_lost_b")
 PROBE_AOVS = ("mnee_probe_rescued", "mnee_probe_missed_r", "mnee_probe_missed_g", "mnee_probe_missed_b")
-
-
-# --------------------------------------------------------------------------- vertex math
-
-def _frame(n, dp_du):
-    """Unit tangent s (dp_du projected onto the tangent plane of n), t = n x s, and |s~|."""
-    s_ = dp_du - n * dr.dot(n, dp_du)
-    ls = dr.norm(s_)
-    s = s_ / ls
-    return s, dr.cross(n, s), s_, ls
-
-
-def half_vector_constraint(wi, d0, y, p, n, dp_du, dp_dv, dn_du, dn_dv, eta):
-    """The constraint ``C = (h.s, h.t)`` at surface point ``p`` and its derivative ``J = dC/d(u, v)``.
-
-    ``wi`` (unit) and ``d0`` give the medium vertex as ``x0 = p + d0 wi``: the walk keeps
-    them as the direction and distance of the ray cast from ``x0`` (exact in float32 even
-    when ``x0`` lies a hair below the surface, where ``p - x0`` would lose all digits).
-
-    ``h = eta wi + wo`` is the (unnormalised) generalized half vector of a refraction from
-    ``y`` (outside, index 1) to ``x0`` (inside, relative index ``eta``); Snell's law
-    holds iff its tangential part vanishes, ``C = 0``. ``|C| = |eta sin(theta_i) -
-    sin(theta_o)|`` in the plane of incidence. Hanika et al. normalise ``h``; without the
-    normalisation the constraint stays well posed as ``eta -> 1`` (where ``|h| -> 0`` on
-    every straight line and the normalised form loses all float precision), and the
-    geometry term, a ratio of two derivatives of ``C`` at a root, is the same.
-    ``(s, t)`` is the tangent frame of the shading normal ``n`` (:func:`_frame`); ``(u, v)``
-    the triangle's barycentric parameters, along which the position moves by
-    ``dp_du, dp_dv`` and the unit normal by ``dn_du, dn_dv``. Returns
-    ``(C0, C1, J00, J01, J10, J11, aux)`` with ``aux`` the quantities the geometry term
-    reuses.
-    """
-    wo_ = y - p
-    d1 = dr.norm(wo_)
-    wo = wo_ / d1
-    h = eta * wi + wo
-    s, t, s_, ls = _frame(n, dp_du)
-
-    def d_c(dp, dn):
-        # d(wi)/dq = -(I - wi wi^T) dp / d0, likewise wo.
-        dh = -eta * (dp - wi * dr.dot(wi, dp)) / d0 - (dp - wo * dr.dot(wo, dp)) / d1
-        # dp_du is constant on a triangle; only n moves the frame.
-        ds_ = -(dn * dr.dot(n, dp_du) + n * dr.dot(dn, dp_du))
-        ds = (ds_ - s * dr.dot(s, ds_)) / ls
-        dt = dr.cross(dn, s) + dr.cross(n, ds)
-        return dr.dot(dh, s) + dr.dot(h, ds), dr.dot(dh, t) + dr.dot(h, dt)
-
-    j00, j10 = d_c(dp_du, dn_du)
-    j01, j11 = d_c(dp_dv, dn_dv)
-    aux = {"wi": wi, "wo": wo, "d0": d0, "d1": d1, "s": s, "t": t}
-    return dr.dot(h, s), dr.dot(h, t), j00, j01, j10, j11, aux
-
-
-def light_derivative_det(aux):
-    """``|det dC/d(y_perp)|``: the constraint's change when the light moves perpendicular to ``wo``."""
-    e1, e2 = mi.coordinate_system(aux["wo"])
-    s, t, d1 = aux["s"], aux["t"], aux["d1"]
-    # d(h) = d(wo) = (I - wo wo^T) e / d1 = e / d1 for e _|_ wo.
-    a00, a10 = dr.dot(e1, s) / d1, dr.dot(e1, t) / d1
-    a01, a11 = dr.dot(e2, s) / d1, dr.dot(e2, t) / d1
-    return dr.abs(a00 * a11 - a01 * a10)
-
-
-def generalized_geometry(wi, d0, y, p, n, ng, dp_du, dp_dv, dn_du, dn_dv, eta):
-    """``E / (I T Tr)``: irradiance at ``x0`` per unit light intensity through the refraction at ``p``.
-
-    ``eta^2 |n_g . wi| / d0^2 * |det dC/dy_perp| / |det dC/d(u,v)| * |dp_du x dp_dv|``
-    (module docstring, step 3), with ``wi, d0`` as in :func:`half_vector_constraint`.
-    Tends to ``1 / |y - x0|^2`` when ``eta -> 1``.
-    """
-    c0, c1, j00, j01, j10, j11, aux = half_vector_constraint(wi, d0, y, p, n, dp_du, dp_dv, dn_du, dn_dv, eta)
-    det_j = dr.abs(j00 * j11 - j01 * j10)
-    area = dr.norm(dr.cross(dp_du, dp_dv))
-    dA_dAy = light_derivative_det(aux) / det_j * area
-    g = dr.square(eta) * dr.abs(dr.dot(ng, aux["wi"])) / dr.square(aux["d0"]) * dA_dAy
-    return dr.select(det_j > MIN_DET, g, 0.0), aux
-
-
-def plane_refraction_point(rel, rel_y, n, eta, iterations=12):
-    """Exact refraction point through the plane with normal ``n`` through ``x0 + rel``, as an offset from ``x0``.
-
-    ``rel_y = y - x0``. In the plane of incidence the problem is one-dimensional: with
-    depth ``a`` of ``x0``, height ``b`` of ``y`` and horizontal distance ``D`` between
-    their feet, the point at distance ``r`` from the foot of ``x0`` satisfies Snell's law
-    when ``g(r) = eta r / sqrt(r^2 + a^2) - (D - r) / sqrt((D - r)^2 + b^2) = 0``; ``g``
-    rises monotonically from ``g(0) < 0`` to ``g(D a / (a + b)) >= 0`` (the straight line's
-    crossing), so Newton's method kept inside a shrinking bracket converges. Returns
-    ``(offset, valid)``; invalid when ``x0`` is not below or ``y`` not above the plane.
-    """
-    a = dr.dot(rel, n)
-    b = dr.dot(rel_y, n) - a
-    horiz = rel_y - dr.dot(rel_y, n) * n
-    big_d = dr.norm(horiz)
-    e = horiz / dr.maximum(big_d, 1e-30)
-    # Start from the straight line's direction bent by Snell's law at x0's depth (exact for a << b).
-    r_straight = big_d * a / dr.maximum(a + b, 1e-30)
-    lo, hi = mi.Float(0.0), mi.Float(r_straight)
-    sin_o = big_d / dr.sqrt(dr.square(big_d) + dr.square(a + b))
-    sin_i = dr.minimum(sin_o / eta, 0.999999)
-    r = dr.minimum(a * sin_i / dr.sqrt(1.0 - dr.square(sin_i)), r_straight)
-    for _ in range(iterations):
-        q0 = dr.sqrt(dr.square(r) + dr.square(a))
-        q1 = dr.sqrt(dr.square(big_d - r) + dr.square(b))
-        g = eta * r / q0 - (big_d - r) / q1
-        dg = eta * dr.square(a) / (q0 * q0 * q0) + dr.square(b) / (q1 * q1 * q1)
-        lo = dr.select(g < 0, r, lo)
-        hi = dr.select(g < 0, hi, r)
-        r_newton = r - g / dg
-        r = dr.select((r_newton > lo) & (r_newton < hi), r_newton, 0.5 * (lo + hi))
-    return a * n + r * e, (a > 0) & (b > 0)
 
 
 def _index_spectrum(spec, channel):
@@ -269,23 +184,9 @@ def _mis(a, b):
     return dr.select(a2 + b2 > 0, a2 / (a2 + b2), 0.0)
 
 
-class _Vertex:
-    """The surface data one manifold walk carries: position, normals and their partials, shape id."""
-
-    FIELDS = ("p", "n", "ng", "dp_du", "dp_dv", "dn_du", "dn_dv")
-
-    @staticmethod
-    def of(si):
-        return (mi.Point3f(si.p), mi.Vector3f(si.sh_frame.n), mi.Vector3f(si.n), mi.Vector3f(si.dp_du),
-                mi.Vector3f(si.dp_dv), mi.Vector3f(si.dn_du), mi.Vector3f(si.dn_dv))
-
-
-WALK_FLAGS = mi.RayFlags.All | mi.RayFlags.dNSdUV
-
-
 # --------------------------------------------------------------------------- the integrator
 
-class MNEEVolpathIntegrator(mi.SamplingIntegrator):
+class MNEEVolpathIntegrator(ManifoldConnections):
     """Volumetric path tracer with manifold next-event estimation; see the module docstring."""
 
     def __init__(self, props):
@@ -311,6 +212,10 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         self.probe_seeds = int(get("probe_seeds"))
         if self.probe_seeds < 0 or (self.probe_seeds and not self.stats):
             raise ValueError(f"{PLUGIN_NAME}: probe_seeds = {self.probe_seeds} must be >= 0 and needs stats = true")
+        self.max_crossings = int(get("max_crossings"))
+        if not 1 <= self.max_crossings <= chain.MAX_CROSSINGS_LIMIT:
+            raise ValueError(f"{PLUGIN_NAME}: max_crossings = {self.max_crossings} must lie in "
+                             f"[1, {chain.MAX_CROSSINGS_LIMIT}]")
         self._eta_table = None
 
     def aov_names(self):
@@ -349,233 +254,6 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
         sid = dr.reinterpret_array(mi.UInt32, shape)
         ok = active & (sid < dr.width(self._eta_table))
         return dr.gather(mi.Float, self._eta_table, sid, ok)
-
-    # ------------------------------------------------------------------ transmittance
-
-    @dr.syntax
-    def _ratio_track(self, medium, origin, target, sampler, active):
-        """Transmittance of ``medium`` along the straight segment origin -> target (no surfaces on it).
-
-        Homogeneous media: ``exp(-sigma_t d)``. Otherwise ratio tracking (Novak et al. 2014)
-        with the majorant ``ratio_tracking_scale * max(majorant)``: tentative collisions at
-        that rate, each multiplying the estimate by ``1 - sigma_t(x) / majorant``.
-        """
-        active = mi.Bool(active) & (medium != None)  # noqa: E711 (Dr.Jit pointer comparison)
-        d = target - origin
-        dist = dr.norm(d)
-        direction = d / dr.maximum(dist, 1e-30)
-        tr = mi.Spectrum(1.0)
-        probe = dr.zeros(mi.MediumInteraction3f)
-        probe.p = mi.Point3f(origin)
-        homogeneous = active & medium.is_homogeneous()
-        _, _, sigma_t0 = medium.get_scattering_coefficients(probe, homogeneous)
-        tr[homogeneous] = dr.exp(-sigma_t0 * dist)
-        tracking = active & ~homogeneous
-        mu = self.ratio_tracking_scale * dr.max(medium.get_majorant(probe, tracking))
-        tracking &= mu > 0
-        t = mi.Float(0.0)
-        while dr.hint(tracking, label="mnee ratio tracking"):
-            t += -dr.log(1.0 - sampler.next_1d(tracking)) / mu
-            tracking &= t < dist
-            probe.p = dr.fma(direction, t, origin)
-            _, _, sigma_t = medium.get_scattering_coefficients(probe, tracking)
-            tr[tracking] *= dr.maximum(1.0 - sigma_t / mu, 0.0)
-            tracking &= dr.any(tr > 0.0)
-        return tr
-
-    @dr.syntax
-    def _transmittance_to(self, scene, sampler, ref, target, medium, active):
-        """Transmittance from interaction ``ref`` to point ``target`` through null interfaces and media.
-
-        A surface whose BSDF is not null (``eval_null_transmission`` = 0, e.g. a dielectric)
-        blocks the segment.
-        """
-        active = mi.Bool(active)
-        medium = dr.select(active, medium, dr.zeros(mi.MediumPtr))
-        ray = ref.spawn_ray_to(target)
-        remaining = mi.Float(ray.maxt)
-        tr = mi.Spectrum(1.0)
-        while dr.hint(active, label="mnee shadow segment"):
-            ray.maxt = remaining
-            si = scene.ray_intersect(ray, mi.RayFlags.All, active)
-            hit = active & si.is_valid()
-            seg = dr.select(hit, si.t, remaining)
-            tr[active] *= self._ratio_track(medium, ray.o, ray(seg), sampler, active)
-            bsdf = si.bsdf(ray)
-            tr[hit] *= bsdf.eval_null_transmission(si, hit)
-            active = hit & dr.any(tr > 0.0)
-            medium[active & si.is_medium_transition()] = si.target_medium(ray.d)
-            remaining -= seg
-            ray[active] = si.spawn_ray(ray.d)
-        return tr
-
-    # ------------------------------------------------------------------ manifold walk
-
-    @dr.syntax
-    def _walk(self, scene, x0, y, si0, omega0, eta, active):
-        """Newton walk on the half-vector constraint from the seed ``si0`` (hit along ``omega0`` from ``x0``).
-
-        The iterate is the direction ``omega`` of the ray from ``x0`` and the distance
-        ``dist`` to its hit (so ``x1 = x0 + dist omega`` without cancellation); a Newton
-        step ``delta`` in the tangent plane turns it into ``normalize(dist omega - beta
-        delta)``. Far from a solution (``|C| > PLANE_SWITCH``, typically a vertex just
-        below the surface whose straight segment leaves it at a grazing angle) the step
-        goes to the exact refraction point in the current tangent plane
-        (:func:`plane_refraction_point`) instead; close to it Newton converges
-        quadratically. Returns ``(converged, vertex, omega, dist, iterations, residual)``.
-        """
-        p, n, ng, dp_du, dp_dv, dn_du, dn_dv = _Vertex.of(si0)
-        omega = mi.Vector3f(omega0)
-        dist = mi.Float(si0.t)
-        shape_id = dr.reinterpret_array(mi.UInt32, si0.shape)
-        rel_y = y - x0
-        beta = mi.Float(1.0)                     # Newton step factor (halved on a rejected step)
-        iteration = mi.UInt32(0)
-        converged = mi.Bool(False)
-        walking = mi.Bool(active)
-        residual = mi.Float(dr.inf)
-        tol = self.newton_tolerance
-        while dr.hint(walking, label="mnee newton walk"):
-            c0, c1, j00, j01, j10, j11, aux = half_vector_constraint(-omega, dist, y, p, n, dp_du, dp_dv,
-                                                                     dn_du, dn_dv, eta)
-            c2 = dr.square(c0) + dr.square(c1)
-            det = j00 * j11 - j01 * j10
-            du = (j11 * c0 - j01 * c1) / det
-            dv = (j00 * c1 - j10 * c0) / det
-            step = du * dp_du + dv * dp_dv
-            # The light side's float32 rounding of x1 bounds the residual from below.
-            floor = POSITION_EPS * dr.maximum(dr.max(dr.abs(p)), 1.0) / aux["d1"]
-            done = walking & (dr.sqrt(c2) < tol + floor)
-            converged |= done
-            residual[walking] = dr.sqrt(c2)
-            walking &= ~done & (iteration < self.newton_iterations)
-            rel = dist * omega - beta * step
-            far = c2 > PLANE_SWITCH * PLANE_SWITCH
-            plane_rel, plane_ok = plane_refraction_point(dist * omega, rel_y, n, eta)
-            rel[far] = plane_rel
-            walking &= dr.select(far, plane_ok, dr.abs(det) > MIN_DET)
-            ray = mi.Ray3f(x0, dr.normalize(rel))
-            ray.maxt = 2.0 * dr.norm(rel)
-            si = scene.ray_intersect(ray, WALK_FLAGS, walking)
-            wo = dr.normalize(y - si.p)
-            ok = (walking & si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id)
-                  & (dr.dot(si.n, ray.d) > 0) & (dr.dot(si.n, wo) > 0)
-                  & (dr.dot(si.sh_frame.n, ray.d) > 0) & (dr.dot(si.sh_frame.n, wo) > 0))
-            p[ok] = si.p
-            n[ok] = si.sh_frame.n
-            ng[ok] = si.n
-            dp_du[ok] = si.dp_du
-            dp_dv[ok] = si.dp_dv
-            dn_du[ok] = si.dn_du
-            dn_dv[ok] = si.dn_dv
-            omega[ok] = ray.d
-            dist[ok] = si.t
-            beta = dr.select(ok | far, dr.minimum(1.0, 2.0 * beta), 0.5 * beta)
-            walking &= ok | ~far                 # a plane step that leaves the shape ends the walk
-            iteration += 1
-            walking &= beta >= MIN_STEP
-        return converged, (p, n, ng, dp_du, dp_dv, dn_du, dn_dv), omega, dist, iteration, residual
-
-    def _manifold_value(self, scene, sampler, x0, y, si_seed, omega_seed, eta, emitter, u2, sel_weight, medium,
-                        active):
-        """One walk from a seed and, where it ends in a visible transmissive solution, its light at ``x0``.
-
-        Returns ``(converged, connected, value, direction, x1)``: ``value`` is the
-        irradiance at ``x0`` along ``direction`` divided by the light's selection density
-        (``I T Tr G / p_select``, module docstring steps 3-5).
-        """
-        converged, vertex, omega, dist, _, _ = self._walk(scene, x0, y, si_seed, omega_seed, eta, active)
-        p, n, ng, dp_du, dp_dv, dn_du, dn_dv = vertex
-        g, aux = generalized_geometry(-omega, dist, y, p, n, ng, dp_du, dp_dv, dn_du, dn_dv, eta)
-        wo = aux["wo"]
-        conn = converged & (g > 0) & (dr.dot(n, wo) > 0) & (dr.dot(ng, wo) > 0)
-        it1 = dr.zeros(mi.Interaction3f)
-        it1.p = p
-        it1.n = ng
-        it1.t = 0.0
-        conn &= ~scene.ray_test(it1.spawn_ray_to(y), conn)
-        ds1, em1 = emitter.sample_direction(it1, u2, conn)
-        intensity = em1 * dr.square(ds1.dist)         # point/spot value is I(w) / r^2 (pdf 1)
-        fresnel_r, _, _, _ = mi.fresnel(dr.dot(n, wo), eta)
-        tr = self._ratio_track(medium, x0, p, sampler, conn)
-        value = dr.select(conn, sel_weight * intensity * (1.0 - fresnel_r) * g * tr, 0.0)
-        return converged, conn, value, omega, p
-
-    def _connect(self, scene, sampler, mei, medium, active, allow_manifold, phase_value):
-        """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
-
-        ``allow_manifold`` says where the two segments of a manifold connection still fit
-        into ``max_depth``; where they do not, an eligible vertex gets no connection at all
-        (a straight one would be blocked by the interface). ``phase_value(direction)`` is
-        the phase function toward a direction (used by the probe seeds). Returns
-        ``(value, direction, pdf, stats)``: the light arriving at ``mei`` along
-        ``direction`` divided by its sampling density (times the phase function gives the
-        contribution), the solid-angle pdf used for MIS (0 for delta lights), and the
-        :data:`STATS_AOVS` of this vertex.
-        """
-        idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
-        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
-        u2 = sampler.next_2d(active)
-        ds, em_val = emitter.sample_direction(mei, u2, active)
-        active &= ds.pdf > 0
-        delta_pos = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
-
-        # ---- seed: where the straight segment toward the light leaves the object
-        seed_ray = mi.Ray3f(mei.p, ds.d)
-        seed_ray.maxt = ds.dist
-        si0 = scene.ray_intersect(seed_ray, WALK_FLAGS, active)
-        eta = self._shape_eta(si0.shape, active & si0.is_valid())
-        eligible = active & delta_pos & si0.is_valid() & (eta > 0) & (dr.dot(si0.n, ds.d) > 0)
-        manifold = eligible & allow_manifold
-        straight = active & ~eligible
-
-        # ---- straight connection (index-matched or open path): ratio-tracked shadow segment
-        tr = self._transmittance_to(scene, sampler, mei, ds.p, medium, straight)
-        value = dr.select(straight, em_val * sel_weight * tr, 0.0)
-        direction = mi.Vector3f(ds.d)
-        pdf = dr.select(ds.delta, 0.0, ds.pdf / sel_weight)
-
-        # ---- manifold connection through the interface
-        y = ds.p
-        converged, conn, m_value, omega, x1 = self._manifold_value(scene, sampler, mei.p, y, si0, ds.d, eta, emitter,
-                                                                   u2, sel_weight, medium, manifold)
-        value[conn] = m_value
-        direction[conn] = omega
-        pdf[eligible] = 0.0
-        stats = [dr.select(manifold, 1.0, 0.0), dr.select(converged, 1.0, 0.0), dr.select(conn, 1.0, 0.0)]
-        if self.probe_seeds:
-            stats += self._probe(scene, sampler, mei.p, y, ds.d, eta, emitter, u2, sel_weight, medium, manifold,
-                                 conn, x1, phase_value)
-        return value, direction, pdf, stats
-
-    def _probe(self, scene, sampler, x0, y, to_light, eta, emitter, u2, sel_weight, medium, active, conn, x1,
-               phase_value):
-        """Diagnostics: walks from ``probe_seeds`` random seeds; the light of the solutions the main walk missed.
-
-        Each seed is the first surface point along a direction drawn uniformly from the
-        hemisphere around the direction to the light. A converged, connected solution more
-        than ``1e-4 max(|x1|, 1)`` away from every solution found before (the main one
-        included) is new: its contribution (times the phase function) is added to the
-        missed light, a lower bound of the energy the single walk loses to failed walks
-        and further solutions. Returns the ``mnee_probe_*`` AOVs.
-        """
-        frame = mi.Frame3f(to_light)
-        found = [(x1, conn)]
-        missed = mi.Spectrum(0.0)
-        rescued = mi.Bool(False)
-        for _ in range(self.probe_seeds):
-            d = frame.to_world(mi.warp.square_to_uniform_hemisphere(sampler.next_2d(active)))
-            si = scene.ray_intersect(mi.Ray3f(x0, d), WALK_FLAGS, active)
-            seeded = active & si.is_valid() & (self._shape_eta(si.shape, active & si.is_valid()) > 0)
-            _, conn_k, value_k, omega_k, x_k = self._manifold_value(scene, sampler, x0, y, si, d, eta, emitter, u2,
-                                                                  sel_weight, medium, seeded)
-            new = mi.Bool(conn_k)
-            for x_j, ok_j in found:
-                new &= ~ok_j | (dr.norm(x_k - x_j) > 1e-4 * dr.maximum(dr.max(dr.abs(x_k)), 1.0))
-            missed[new] += value_k * phase_value(omega_k, new)
-            rescued |= new & ~conn
-            found.append((x_k, conn_k))
-        return [dr.select(rescued, 1.0, 0.0), missed[0], missed[1], missed[2]]
 
     # ------------------------------------------------------------------ path tracing
 
@@ -642,16 +320,19 @@ class MNEEVolpathIntegrator(mi.SamplingIntegrator):
             phase_ctx = mi.PhaseFunctionContext(sampler)
             phase = mei.medium.phase_function()
             nee = real & mei.medium.use_emitter_sampling()
-            # A manifold connection needs two more segments, a straight one one.
-            value, direction, nee_pdf, stats = self._connect(
-                scene, sampler, mei, medium, nee, depth + 1 < self.max_depth,
-                lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
-            # Per-vertex counts; the missed light of the probes (AOVs 4-6) carries the throughput.
-            weights = [1.0, 1.0, 1.0, 1.0, beta[0], beta[1], beta[2]]
-            for k in range(len(counters)):
-                counters[k] += dr.select(nee, stats[k] * weights[k], 0.0)
+            # A manifold connection through k crossings needs k + 1 more segments, a straight one one.
+            value, direction, nee_pdf, (chain_value, chain_dir), stats = self._connect(
+                scene, sampler, mei, medium, nee, depth, lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
+            # Per-vertex counts; the lost light and the probes' missed light (AOVs *_r, *_g, *_b)
+            # carry the throughput.
+            for k, name in enumerate(self.aov_names()):
+                weight = beta["rgb".index(name[-1])] if name[-2:] in ("_r", "_g", "_b") else 1.0
+                counters[k] += dr.select(nee, stats[k] * weight, 0.0)
             phase_val, phase_pdf = phase.eval_pdf(phase_ctx, mei, direction, nee)
             L[nee] += beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
+            chained = nee & dr.any(chain_value != 0.0)
+            phase_chain, _ = phase.eval_pdf(phase_ctx, mei, chain_dir, chained)
+            L[chained] += beta * phase_chain * chain_value
 
             # ---------------- phase-function sampling
             wo, phase_w, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(real), sampler.next_2d(real), real)

@@ -687,6 +687,14 @@ class ReferencePlan:
             "files": list(REFERENCE_FILES) + (["absorber.exr"] if absorber else []),
             **ms.scene_notes(self.scene),
         }
+        if ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters:
+            # What the manifold connections leave out, measured (harness.reference.losses); a reference
+            # whose lost light exceeds its share of the noise target says so and is not judged against.
+            from harness.reference import losses
+
+            found = losses.measure(self.scene, self.setup.variant)
+            exact, note = losses.verdict(found, self.target)
+            meta.update(mnee_losses=found, exact=exact, exact_note=note)
         with atomic_dir(self.out_dir) as tmp:
             write_exr(tmp / "full.exr", fm, fse)
             write_exr(tmp / "subsurface.exr", sm, sse)
@@ -702,7 +710,8 @@ class ReferencePlan:
         self.close_progress(f"done: median rel. SE {r_sub:.2%} (target {self.target:.2%}"
                             f"{', met' if meta['target_met'] else ', NOT met'}), {final.spp * K} spp in all, "
                             f"{format_duration(meta['wall_seconds'])}"
-                            + (f"; stopped by {self.capped_by}" if self.capped_by else ""))
+                            + (f"; stopped by {self.capped_by}" if self.capped_by else "")
+                            + (f"; {meta['exact_note']}" if meta.get("exact") is False else ""))
         return meta
 
     def close_progress(self, message=None):

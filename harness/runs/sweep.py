@@ -261,14 +261,19 @@ def load_reference(ref_dir, shape):
     coverage (fully covered pixels only; ``coverage`` keeps the fractions), the one
     comparison mask of every metric, verdict and calibration. ``se`` and ``se_full``
     are the standard errors of the subsurface and full images (None where the file
-    has none), ``K`` the number of independent seeds they were estimated from.
+    has none), ``K`` the number of independent seeds they were estimated from. A reference
+    whose ``reference.json`` says ``"exact": false`` is refused in one line unless
+    ``SSLPV_ALLOW_INEXACT_REFERENCE=1`` (:func:`harness.reference.losses.check_exact`).
     """
     import json
 
     from harness.io.images import read_exr
     from harness.metrics.coverage import comparison_mask
 
+    from harness.reference.losses import check_exact
+
     ref_dir = Path(ref_dir)
+    check_exact(ref_dir)      # a reference that says it is not exact is refused without the opt-in
     sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
     full = read_exr(ref_dir / "full.exr", expect_shape=shape)
     mask_layer, _ = reference_coverage(ref_dir / "subsurface.exr", sub, shape)

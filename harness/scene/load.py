@@ -24,7 +24,7 @@ import numpy as np
 from harness import paths
 from harness.errors import InputError
 from harness.scene.geometry import Mesh
-from harness.scene.model import SceneFile
+from harness.scene.model import MAX_CROSSINGS_DEFAULT, SceneFile
 from harness.validation import read_toml, validate
 
 SUITE_DIR = paths.SUITE_DIR
@@ -51,6 +51,7 @@ class Boundary:
     kind: str
     eta: float = 1.0
     roughness: float = 0.0
+    max_crossings: int = MAX_CROSSINGS_DEFAULT
 
     @property
     def index_matched(self):
@@ -98,6 +99,15 @@ class Scene:
         return dataclasses.replace(out, content_hash=scene_hash(out))
 
 
+def _boundary_key(boundary):
+    """The boundary's fields for the hash; ``max_crossings`` only where it is not the default, so that the
+    content hash of every scene written before the field existed stays the same."""
+    key = dataclasses.asdict(boundary)
+    if key.get("max_crossings") == MAX_CROSSINGS_DEFAULT:
+        del key["max_crossings"]
+    return key
+
+
 def scene_hash(scene):
     """sha256 over everything that changes an image: geometry, camera, lights, boundary and grids."""
     h = hashlib.sha256()
@@ -105,7 +115,7 @@ def scene_hash(scene):
         "units": scene.units,
         "camera": dataclasses.asdict(scene.camera),
         "lights": [dataclasses.asdict(light) for light in scene.lights],
-        "boundary": dataclasses.asdict(scene.boundary),
+        "boundary": _boundary_key(scene.boundary),
         "bbox": [list(map(float, scene.medium.bbox_min)), list(map(float, scene.medium.bbox_max))],
     }
     h.update(json.dumps(meta, sort_keys=True, default=float).encode())
@@ -159,7 +169,8 @@ def scene_from_model(spec, path):
                               tuple(np.asarray(lt.intensity, dtype=np.float64))) for lt in spec.lights)
     b = spec.boundary
     boundary = Boundary(b.kind) if b.kind == "index-matched" else Boundary(b.kind, eta=float(b.eta),
-                                                                          roughness=float(b.roughness))
+                                                                          roughness=float(b.roughness),
+                                                                          max_crossings=int(b.max_crossings))
     medium = Medium(np.asarray(spec.medium.bbox_min, dtype=np.float64), np.asarray(spec.medium.bbox_max,
                                                                                     dtype=np.float64),
                     **spec.medium.grids)

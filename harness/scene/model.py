@@ -80,6 +80,12 @@ class IndexMatchedBoundary(InputModel):
     kind: Literal["index-matched"]
 
 
+#: ``[boundary] max_crossings``: the longest chain of refractions a manifold connection of the exact
+#: reference follows (1, 3, 5, ... crossings of the boundary; :mod:`harness.reference.mnee_chain`),
+#: its default and its limit (each crossing adds a ray cast per Newton iteration).
+MAX_CROSSINGS_DEFAULT = 5
+MAX_CROSSINGS_LIMIT = 9
+
 #: Relative index of refraction (inside / outside) a dielectric boundary may have: above 1
 #: (1 is index-matched; a medium less dense than its surroundings is not supported) up to 3.
 ETA_RANGE = (1.0, 3.0)
@@ -115,6 +121,11 @@ class DielectricBoundary(InputModel):
     eta: float = Field(description="relative index of refraction (inside / outside), in (1, 3]", examples=[1.4])
     roughness: Annotated[float, Field(ge=0.0, le=1.0)] = Field(
         0.1, description="GGX alpha of the interface; 0 is a smooth interface (exact reference)", examples=[0.0])
+    max_crossings: Annotated[int, Field(ge=1, le=MAX_CROSSINGS_LIMIT)] = Field(
+        MAX_CROSSINGS_DEFAULT, description="smooth interface: the most boundary crossings a connection from a medium "
+        "vertex to a point light follows (1, 3, 5, ...; a light path that leaves the object and passes through "
+        f"another part of it crosses 3 times), 1 to {MAX_CROSSINGS_LIMIT}; longer ones are counted and their light "
+        "estimated in reference.json", examples=[5])
 
     @model_validator(mode="after")
     def _supported(self):

@@ -1,0 +1,334 @@
+"""Validation of ``mneevolpath``'s chains through 3, 5, ... interfaces (:mod:`harness.reference.mnee_chain`).
+
+What each group checks, and the tolerance it states:
+
+* chain math: the block-tridiagonal Jacobian assembled from :func:`chain_blocks` against
+  central differences of the constraint over all vertices' barycentric parameters, on a
+  ray through the torus's two sides (2e-3 of max |J|); the block Thomas solve and its
+  determinant against ``numpy.linalg`` (1e-4 relative, float32); a one-vertex chain's
+  geometry term equals the single-vertex :func:`harness.reference.mnee.generalized_geometry`
+  (1e-4 relative);
+* test (a), eta -> 1 on a non-convex scene (the torus lit through its hole,
+  :func:`harness.reference.nonconvex.torus_hole`, where about a fifth of the connections
+  cross the boundary three times): eta = 1.0001 against index-matched ``volpath``, image mean
+  within 1 % or 3 combined SE per channel, >= 99 % of covered pixels within 4 SE; the same
+  comparison with chains switched off (``max_crossings = 1``) must fail;
+* test (b), single scattering under a slab (three parallel interfaces): ``max_depth = 6``
+  against the NumPy route of :mod:`harness.reference.halfspace` (``SLAB_SETUP``) at eta 1.33
+  and 1.5, >= 99 % of pixels within 4 SE, none beyond 8, mean z^2 in [0.6, 1.6], image mean
+  within 1 %; the same must fail against NumPy images with one Fresnel factor too few and
+  with the straight inverse-square law;
+* the bad input: ``max_crossings`` 0 or above the limit.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from harness.scene import Boundary
+
+ms = pytest.importorskip("harness.reference.mitsuba_scene")
+
+
+@pytest.fixture(scope="module")
+def mi():
+    return ms.use_variant("llvm_ad_rgb")
+
+
+def render_stack(mi, scene_dict, seeds, spp):
+    scene = mi.load_dict(scene_dict)
+    return np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
+
+
+def z_statistics(z):
+    return float(np.mean(np.all(np.abs(z) <= 4, axis=-1))), float(np.abs(z).max()), float(np.mean(z ** 2))
+
+
+# --------------------------------------------------------------------------- chain math
+
+class TestChainMath:
+    def test_tridiagonal_solve_matches_dense(self, mi):
+        from harness.reference import mnee_chain as mc
+
+        rng = np.random.default_rng(1)
+        k = 4
+        blocks = {name: [rng.normal(size=(2, 2)) for _ in range(k)] for name in "ABU"}
+        for i in range(k):
+            blocks["B"][i] += 3 * np.eye(2)          # diagonally dominant, as near a solution
+        dense = np.zeros((2 * k, 2 * k))
+        for i in range(k):
+            dense[2 * i:2 * i + 2, 2 * i:2 * i + 2] = blocks["B"][i]
+            if i:
+                dense[2 * i:2 * i + 2, 2 * i - 2:2 * i] = blocks["A"][i]
+            if i < k - 1:
+                dense[2 * i:2 * i + 2, 2 * i + 2:2 * i + 4] = blocks["U"][i]
+        rhs = rng.normal(size=2 * k)
+
+        def t(m):
+            return tuple(mi.Float(float(v)) for v in m.ravel())
+
+        A = [None] + [t(blocks["A"][i]) for i in range(1, k)]
+        U = [t(blocks["U"][i]) for i in range(k - 1)] + [None]
+        x, det = mc.solve_tridiagonal(A, [t(b) for b in blocks["B"]], U,
+                                      [(mi.Float(rhs[2 * i]), mi.Float(rhs[2 * i + 1])) for i in range(k)])
+        got = np.array([float(c[0]) for xi in x for c in xi])
+        np.testing.assert_allclose(got, np.linalg.solve(dense, rhs), rtol=1e-4, atol=1e-5)
+        assert abs(float(det[0]) / np.linalg.det(dense) - 1) < 1e-4
+
+    @pytest.fixture(scope="class")
+    @classmethod
+    def torus_chain(cls, mi):
+        """Three crossings of a ray through the torus (leaves, enters the other side, leaves), with triangle data."""
+        import drjit as dr
+
+        from harness.reference import mnee_chain as mc
+        from harness.reference import nonconvex
+
+        mesh = nonconvex.torus_hole().mesh
+        scene = mi.load_dict({"type": "scene", "o": ms.mitsuba_mesh(mesh)})
+        x0 = np.array([0.0, 0.0, 0.0])
+        # Start inside the ring: the point on its centre circle farthest along +x, found by casting.
+        probe = scene.ray_intersect(mi.Ray3f(mi.Point3f(2.0, 0.0, 0.0), mi.Vector3f(-1.0, 0.0, 0.0)))
+        t_in = float(probe.t[0])
+        probe2 = scene.ray_intersect(mi.Ray3f(mi.Point3f(2.0 - t_in + 1e-3, 0.0, 0.0), mi.Vector3f(-1.0, 0.0, 0.0)))
+        x0 = np.array([2.0 - t_in - 0.5 * float(probe2.t[0]), 0.0, 0.0])
+        direction = np.array([-1.0, 0.05, 0.02])
+        direction /= np.linalg.norm(direction)
+        verts, dist, ok = mc.seed_chain(scene, mi.Point3f(*map(float, x0)), mi.Vector3f(*map(float, direction)), 3,
+                                        dr.reinterpret_array(mi.UInt32, probe.shape), True)
+        assert bool(ok[0]), "the test ray does not cross the torus three times"
+        tri = []
+        ray = mi.Ray3f(mi.Point3f(*map(float, x0)), mi.Vector3f(*map(float, direction)))
+        for _ in range(3):
+            si = scene.ray_intersect(ray, mc.WALK_FLAGS, True)
+            f = mesh.faces[int(si.prim_index[0])]
+            tri.append((mesh.vertices[f], mesh.normals[f], float(si.uv.x[0]), float(si.uv.y[0])))
+            ray = si.spawn_ray(ray.d)
+        return x0, tri
+
+    def test_chain_jacobian_matches_central_differences(self, mi, torus_chain):
+        """The whole 6 x 6 dC/dX (A, B, U blocks) against central differences over the six barycentric parameters."""
+        import drjit as dr
+
+        from harness.reference import mnee_chain as mc
+
+        x0, tri = torus_chain
+        y = np.array([-3.2, 0.4, 0.4])
+        V3 = lambda a: mi.Vector3f(*[float(c) for c in a])  # noqa: E731
+
+        def vertex(P, N, u, v):
+            p = P[0] + u * (P[1] - P[0]) + v * (P[2] - P[0])
+            raw = N[0] + u * (N[1] - N[0]) + v * (N[2] - N[0])
+            n = raw / np.linalg.norm(raw)
+            dn = [((N[j] - N[0]) - n * (n @ (N[j] - N[0]))) / np.linalg.norm(raw) for j in (1, 2)]
+            return [V3(p), V3(n), V3(n), V3(P[1] - P[0]), V3(P[2] - P[0]), V3(dn[0]), V3(dn[1])], p
+
+        def evaluate(params):
+            verts, first = [], None
+            for i, (P, N, _, _) in enumerate(tri):
+                v, p = vertex(P, N, params[2 * i], params[2 * i + 1])
+                verts.append(v)
+                first = p if i == 0 else first
+            w = first - x0
+            C, A, B, U, _ = mc.chain_blocks(V3(w / np.linalg.norm(w)), mi.Float(np.linalg.norm(w)), verts, V3(y),
+                                            mi.Float(1.4))
+            c = np.array([float(dr.slice(v)) for ci in C for v in ci])
+            J = np.zeros((6, 6))
+            for i in range(3):
+                for name, blk, off in (("A", A[i], -1), ("B", B[i], 0), ("U", U[i], 1)):
+                    if blk is not None:
+                        J[2 * i:2 * i + 2, 2 * (i + off):2 * (i + off) + 2] = np.array(
+                            [float(dr.slice(v)) for v in blk]).reshape(2, 2)
+            return c, J
+
+        params = np.array([q for (_, _, u, v) in tri for q in (u, v)])
+        _, J = evaluate(params)
+        eps = 1e-3
+        fd = np.stack([(evaluate(params + eps * e)[0] - evaluate(params - eps * e)[0]) / (2 * eps)
+                       for e in np.eye(6)], axis=1)
+        assert np.abs(J).max() > 0.05
+        np.testing.assert_allclose(J, fd, atol=2e-3 * np.abs(J).max())
+
+    def test_one_vertex_chain_is_the_single_geometry_term(self, mi):
+        import drjit as dr
+
+        from harness.reference import mnee, mnee_chain as mc
+
+        n = dr.normalize(mi.Vector3f(0.1, 1.0, 0.05))
+        p = mi.Point3f(0.2, 0.0, -0.1)
+        x0 = mi.Point3f(0.0, -0.4, 0.3)
+        y = mi.Point3f(-1.0, 1.7, 0.8)
+        du, dv = mi.Vector3f(0.1, -0.01, 0.0), mi.Vector3f(0.0, 0.0, 0.1)
+        dnu, dnv = mi.Vector3f(0.05, 0.0, 0.01), mi.Vector3f(0.0, 0.02, 0.04)
+        wi = x0 - p
+        g1, _ = mnee.generalized_geometry(dr.normalize(wi), dr.norm(wi), y, p, n, n, du, dv, dnu, dnv, mi.Float(1.4))
+        gk, _, _ = mc.chain_geometry(-dr.normalize(wi), dr.norm(wi), [[p, n, n, du, dv, dnu, dnv]], y, mi.Float(1.4))
+        assert float(g1[0]) > 0 and abs(float(gk[0]) / float(g1[0]) - 1) < 1e-4
+
+
+# --------------------------------------------------------------------------- test (a): eta -> 1, non-convex
+
+@pytest.mark.slow
+def test_eta_one_through_the_hole_reproduces_index_matched_volpath(mi):
+    """torus_hole at 32 x 32: eta = 1.0001 (mneevolpath, stats) against index-matched volpath, K = 8 x 64 spp each.
+
+    32 x 32 gives about 420 covered pixels (at 20 x 20, 106: one pixel in the heavy tail of
+    a 16-spp seed already decides the 99 % criterion).
+    """
+    from harness.reference import nonconvex
+
+    matched = nonconvex.torus_hole(1.0, size=32)
+    b = render_stack(mi, ms.build_scene_dict(matched), range(100, 108), 64)
+    covered = ms.coverage_mask(matched) >= 1.0
+    results = {}
+    for mc in (5, 1):
+        d = ms.build_scene_dict(nonconvex.torus_hole(1.0001, size=32))
+        d["integrator"].update(stats=True, max_crossings=mc)
+        a = render_stack(mi, d, range(8), 64)
+        img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
+        se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
+        lit = covered & np.all(se > 0, axis=-1)
+        z = ((img.mean(0) - b.mean(0)) / np.where(se > 0, se, 1.0))[lit]
+        pa, pb = img.mean((1, 2)), b.mean((1, 2))
+        se_mean = np.sqrt(pa.var(0, ddof=1) / len(pa) + pb.var(0, ddof=1) / len(pb))
+        ratio, diff = pa.mean(0) / pb.mean(0), pa.mean(0) - pb.mean(0)
+        frac4 = float(np.mean(np.all(np.abs(z) <= 4, axis=-1)))
+        ok = frac4 >= 0.99 and bool(np.all((np.abs(ratio - 1) <= 0.01) | (np.abs(diff) <= 3 * se_mean)))
+        from harness.reference import mnee
+
+        st = dict(zip(mnee.STATS_AOVS, aov))
+        cross3 = st["mnee_cross3"] / st["mnee_started"]
+        results[mc] = ok
+        print(f"eta -> 1 through the hole, max_crossings = {mc}: within 4 SE {frac4:.4f} of {lit.sum()} pixels, "
+              f"image mean ratio {np.round(ratio, 4)} (|diff| / SE {np.round(np.abs(diff) / se_mean, 2)}); "
+              f"3 crossings {cross3:.3f} of the connections")
+        assert cross3 > 0.1, "the scene no longer exercises chains"
+    assert results[5], "chains: eta = 1.0001 disagrees with index-matched volpath (see the printed line)"
+    assert not results[1], "without chains the comparison must fail (the scene no longer tests them)"
+
+
+# --------------------------------------------------------------------------- test (b): the slab
+
+@pytest.mark.slow
+class TestSlab:
+    """Single scattering (max_depth = 6) under the slab against NumPy, K = 16 seeds x 32 spp at 16 x 16.
+
+    NumPy: 4 x 4 rays per pixel, 32 Gauss-Legendre nodes (as the half-space test).
+    """
+
+    @pytest.mark.parametrize("eta", [1.33, 1.5])
+    def test_against_numpy(self, mi, eta):
+        from harness.reference import halfspace
+
+        setup = halfspace.SLAB_SETUP
+        scene = halfspace.validation_scene(eta, size=16, setup=setup)
+        assert halfspace.slab_outside_share(scene) < 1e-6
+        stack = render_stack(mi, ms.build_scene_dict(scene, max_depth=6), range(16), 32)
+        mean, se = stack.mean(0), stack.std(0, ddof=1) / np.sqrt(len(stack))
+        ref = halfspace.setup_image(scene, setup=setup, sub=4, nodes=32)
+        lit = np.all(se > 0, axis=-1)
+        assert lit.mean() > 0.9
+        z = ((mean - ref) / np.where(se > 0, se, 1.0))[lit]
+        mean_err = mean.mean((0, 1)) / ref.mean((0, 1)) - 1
+        frac4, zmax, mz2 = z_statistics(z)
+
+        def agrees(zz, err):
+            f4, zm, m2 = z_statistics(zz)
+            return f4 >= 0.99 and zm <= 8 and 0.6 <= m2 <= 1.6 and bool(np.all(np.abs(err) <= 0.01))
+
+        msg = (f"eta {eta}: within 4 SE {frac4:.4f} (>= 0.99), max |z| {zmax:.2f} (<= 8), mean z^2 {mz2:.3f} "
+               f"([0.6, 1.6]), image mean - 1 {np.round(mean_err, 5)} (|.| <= 0.01)")
+        print(f"slab: {msg}")
+        assert agrees(z, mean_err), f"slab: {msg}"
+        planted = {"two Fresnel factors": halfspace.setup_image(scene, setup=setup, sub=2, nodes=32, fresnel_count=2),
+                   "straight inverse square": halfspace.setup_image(scene, setup=setup, sub=2, nodes=32,
+                                                                    geometry="straight")}
+        for name, wrong in planted.items():
+            zw = ((mean - wrong) / np.where(se > 0, se, 1.0))[lit]
+            err = mean.mean((0, 1)) / wrong.mean((0, 1)) - 1
+            print(f"slab eta {eta}, planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image {np.round(err, 4)}")
+            assert not agrees(zw, err), f"a planted error ({name}) would go unnoticed"
+
+
+# --------------------------------------------------------------------------- bad input
+
+@pytest.mark.parametrize("value", [0, 11])
+def test_max_crossings_out_of_range_is_refused(mi, value):
+    from harness.reference import halfspace, mnee_chain
+
+    assert value == 0 or value > mnee_chain.MAX_CROSSINGS_LIMIT
+    d = ms.build_scene_dict(halfspace.validation_scene(1.5, size=4))
+    d["integrator"]["max_crossings"] = value
+    with pytest.raises(Exception, match="max_crossings"):
+        mi.load_dict(d)
+
+
+def test_slab_scene_is_one_closed_shape():
+    from harness.reference import halfspace
+    from harness.scene.geometry import check_closed
+
+    scene = halfspace.validation_scene(1.5, size=4, setup=halfspace.SLAB_SETUP)
+    check_closed(scene.mesh.vertices, scene.mesh.faces)
+    assert dataclasses.replace(scene, boundary=Boundary("index-matched")).mesh is scene.mesh
+
+
+# --------------------------------------------------------------------------- reporting what is lost
+
+class TestReporting:
+    @staticmethod
+    def losses(share, lost=0.1, over=0.05):
+        ch = {"lost_image_share": share, "lost": lost, "over_max": over}
+        return {"max_crossings": 5, "channels": {"R": dict(ch), "G": dict(ch, lost_image_share=share / 2),
+                                                 "B": dict(ch, lost_image_share=0.0)}}
+
+    def test_verdict_against_the_noise_target(self):
+        from harness.reference import losses
+
+        limit = losses.LOSS_FRACTION_OF_TARGET * 0.04
+        exact, note = losses.verdict(self.losses(0.99 * limit), 0.04)
+        assert exact and note.startswith("exact")
+        exact, note = losses.verdict(self.losses(1.01 * limit), 0.04)
+        assert not exact and "channel R" in note and "max_crossings = 5" in note
+
+    def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
+        import json
+
+        from harness.errors import InputError
+        from harness.reference import losses
+        from harness.runs.sweep import load_reference
+
+        monkeypatch.delenv(losses.ALLOW_ENV, raising=False)
+        (tmp_path / "reference.json").write_text(json.dumps({"exact": False, "exact_note": "not exact: because"}))
+        with pytest.raises(InputError) as err:
+            load_reference(tmp_path, (4, 4))
+        line = str(err.value)
+        assert "exact" in line and "not exact: because" in line and losses.ALLOW_ENV in line, line
+        monkeypatch.setenv(losses.ALLOW_ENV, "1")
+        losses.check_exact(tmp_path)                     # the opt-in: no refusal
+        (tmp_path / "reference.json").write_text(json.dumps({"exact": True}))
+        monkeypatch.delenv(losses.ALLOW_ENV)
+        losses.check_exact(tmp_path)
+
+    @pytest.mark.slow
+    def test_reference_records_losses_and_exactness(self, mi, tmp_path):
+        """torus_hole (grey: one pass) at 12 x 12: without chains the reference says it is not exact, with them exact."""
+        import json
+
+        from harness.reference import nonconvex
+        from harness.reference.render import render_reference
+        from harness.scene.load import scene_hash
+
+        base = nonconvex.torus_hole(1.4, size=12)
+        grey = np.ones_like(base.medium.sigma_t)
+        base = base.with_medium(sigma_t=2.0 * grey, albedo=0.85 * grey)
+        for mc, want in ((1, False), (5, True)):
+            scene = dataclasses.replace(base, boundary=dataclasses.replace(base.boundary, max_crossings=mc))
+            scene = dataclasses.replace(scene, content_hash=scene_hash(scene))
+            render_reference(scene, tmp_path / f"ref{mc}", spp=4, K=2)
+            meta = json.loads((tmp_path / f"ref{mc}" / "reference.json").read_text())
+            r = meta["mnee_losses"]["channels"]["R"]
+            print(f"max_crossings = {mc}: {meta['exact_note']}; crossings {r['crossings']}")
+            assert meta["exact"] is want, meta["exact_note"]
+            assert r["crossings"]["3"] > 0.1 and set(meta["mnee_losses"]["channels"]) == {"R", "G", "B"}
+            assert meta["mnee_losses"]["channels"]["G"]["lost_image_share"] > 0
