@@ -1,7 +1,7 @@
 """The study's figures, each as SVG and PNG (ready to cite), drawn from the results table.
 
 * ``pareto``: per scene, the subsurface error (the study's first metric) against the frame's cost
-  (work count, device-independent; ms on this device in the table), every row as a point coloured
+  in ms on this device (the work counts are in the table; ``steady`` has none), every row as a point coloured
   by family, the Pareto front of all methods as a line, the reference's noise floor dashed;
 * ``refine_k``: per scene, the error against K at the budget's N for each SSLPV family
   (``steady`` drawn at the right, apart);
@@ -20,6 +20,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from harness.io.atomic import atomic_write  # noqa: E402
@@ -72,13 +73,13 @@ def pareto(rows, scenes, families, metric, folder):
     col = _colours(families)
     fig, axes = _grid(len(scenes))
     for ax, scene in zip(axes, scenes):
-        rs = [r for r in rows if r["scene"] == scene and r["work"] and _val(r, metric) is not None]
+        rs = [r for r in rows if r["scene"] == scene and r["frame_ms"] and _val(r, metric) is not None]
         for fam in families:
-            pts = [(r["work"], _val(r, metric)) for r in rs if r["family"] == fam]
+            pts = [(r["frame_ms"], _val(r, metric)) for r in rs if r["family"] == fam]
             if pts:
                 ax.scatter(*zip(*pts), s=10, color=col[fam], label=fam, marker="o" if rs and fam in
                            {r["family"] for r in rs if r["method"] == "sslpv"} else "s")
-        pts = [(r["work"], _val(r, metric)) for r in rs]
+        pts = [(r["frame_ms"], _val(r, metric)) for r in rs]
         front = pareto_front(pts)
         if front:
             ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], color="k", lw=0.8)
@@ -87,13 +88,14 @@ def pareto(rows, scenes, families, metric, folder):
             ax.axhline(float(np.median(fl)), color="0.5", ls="--", lw=0.8)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_title(scene, fontsize=8)
         ax.tick_params(labelsize=6)
     axes[0].set_ylabel(f"{_axis_name(metric)} (subsurface)", fontsize=7)
-    axes[-1].set_xlabel("work per frame (device-independent units)", fontsize=7)
+    axes[-1].set_xlabel("frame ms on this device", fontsize=7)
     handles = {f: plt.Line2D([], [], color=col[f], marker="o", ls="") for f in families}
     fig.legend(handles.values(), handles.keys(), fontsize=7, loc="upper right")
-    fig.suptitle(f"Error against cost (black: Pareto front; dashed: the reference's noise floor)", fontsize=9)
+    fig.suptitle("Error against cost (black: Pareto front; dashed: the reference's noise floor)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 0.86, 0.96))
     return _save(fig, folder, "pareto")
 

@@ -54,7 +54,9 @@ def rows_of(configs):
         row = {"scene": c["scene"], "method": method, "family": family_of(method, p),
                "setting": config_label(method, p), "N": p.get("N") if method == "sslpv" else None,
                "K": str(_k(p)) if method == "sslpv" else None, "steps_used": c.get("steps_used"),
-               "frame_ms": c.get("cost_ms"), "work": float(sum(work.values())) if work else None,
+               "frame_ms": c.get("cost_ms"),
+               # steady solves instead of stepping: its work count has no propagation term, so no total
+               "work": float(sum(work.values())) if work and (method != "sslpv" or "propagation" in work) else None,
                "precompute_ms": (float(sum(v["ms"] for v in pre.values() if v.get("ms") is not None))
                                  if pre else None),
                "outside_share": diag.get("outside_share"), "cached": bool(c.get("cached_from")),
