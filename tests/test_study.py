@@ -9,6 +9,8 @@ headless Chromium (skipped without it). The bad-input tests need no GL: each is 
 exit 2, and nothing written.
 """
 
+import csv
+import io
 import json
 import math
 import os
@@ -143,10 +145,11 @@ def _recompute(row):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """One cold study and one warm rerun into the same folder, with a result cache of their own."""
+    """One cold study, a warm rerun into the same folder (served as it is), and a run into a new folder
+    (every configuration served by the result cache), with a result cache of their own."""
     tmp = tmp_path_factory.mktemp("study")
     study = _study(tmp)
-    out = tmp / "out"
+    out, out2 = tmp / "out", tmp / "out2"
     old = os.environ.get("SSLPV_RESULT_CACHE")
     os.environ["SSLPV_RESULT_CACHE"] = str(tmp / "cache")
     try:
@@ -154,15 +157,18 @@ def runs(tmp_path_factory):
 
         cold = run_study(study, out, progress=False)
         csv_cold = (out / "results.csv").read_text()
+        mtimes = {p: p.stat().st_mtime_ns for p in out.iterdir()}
         warm = run_study(study, out, progress=False)
+        served = run_study(study, out2, progress=False)
     finally:
         if old is None:
             os.environ.pop("SSLPV_RESULT_CACHE", None)
         else:
             os.environ["SSLPV_RESULT_CACHE"] = old
-    cold.pop("_built", None)
-    built = warm.pop("_built")
-    return {"cold": cold, "warm": warm, "out": out, "csv_cold": csv_cold, "built": built, "study": study}
+    built = cold.pop("_built")
+    served.pop("_built", None)
+    return {"cold": cold, "warm": warm, "served": served, "out": out, "out2": out2, "csv_cold": csv_cold,
+            "built": built, "study": study, "mtimes": mtimes}
 
 
 @pytest.mark.gl
@@ -212,11 +218,33 @@ def test_parquet_and_provenance(runs):
 @pytest.mark.gl
 @pytest.mark.slow
 def test_warm_rerun_renders_nothing(runs):
-    cold, warm = runs["cold"], runs["warm"]
-    assert cold["rendered"] == cold["configurations"] and cold["reused"] == 0
-    assert warm["rendered"] == 0 and warm["reused"] == warm["configurations"] == cold["configurations"]
-    strip = re.compile(r",(True|False),")   # the 'cached' column differs, and nothing else may
-    assert strip.sub(",", (runs["out"] / "results.csv").read_text()) == strip.sub(",", runs["csv_cold"])
+    cold, warm, served = runs["cold"], runs["warm"], runs["served"]
+    assert cold["rendered"] == cold["configurations"] and cold["reused"] == 0 and not cold["unchanged"]
+    # the same folder, nothing changed: served as it is, nothing rendered or rewritten
+    assert warm["unchanged"] and warm["rendered"] == 0 and warm["reused"] == warm["configurations"] == 20
+    assert {p: p.stat().st_mtime_ns for p in runs["out"].iterdir()} == runs["mtimes"]
+    # a new folder: the sweep serves every configuration from the result cache and measures it again
+    assert not served["unchanged"] and served["rendered"] == 0 and served["reused"] == 20
+
+    def metrics(text):
+        rows = [dict(r) for r in csv.DictReader(io.StringIO(text))]
+        return [{k: v for k, v in r.items() if k not in ("cached", "render_dir")} for r in rows]
+
+    assert metrics((runs["out2"] / "results.csv").read_text()) == metrics(runs["csv_cold"])
+
+
+@pytest.mark.gl
+def test_a_changed_study_is_not_served_as_it_is(tmp_path):
+    from harness.study.memo import inputs_key
+    from harness.study.run import TEMPLATES
+    from harness.study.spec import load_study
+
+    a = load_study(_study(tmp_path, TINY, "a.toml"))
+    b = load_study(_study(tmp_path, TINY.replace("steps = [4, 8]\n", "steps = [4, 16]\n", 1), "b.toml"))
+    c = load_study(_study(tmp_path, TINY.replace('significance = ["relmse", "energy_ratio"]',
+                                                 'significance = ["relmse"]'), "c.toml"))
+    keys = {inputs_key(s, TEMPLATES) for s in (a, b, c)}
+    assert len(keys) == 3 and inputs_key(a, TEMPLATES) == inputs_key(load_study(tmp_path / "a.toml"), TEMPLATES)
 
 
 @pytest.mark.gl
@@ -242,6 +270,12 @@ def test_headline_table_and_limits(runs):
     html = (runs["out"] / "index.html").read_text()
     body = html.split('<table id="headline">', 1)[1].split("</table>", 1)[0].split("<tbody>", 1)[1]
     assert body.count("<tr>") == 2
+    for scene in head["scenes"]:                 # each cell shows its values and its setting
+        for c in head["overall"][scene].values():
+            r = c["row"]
+            assert f"{r['subsurface_relmse']:.3g} / {r['subsurface_flip']:.3g} / {r['subsurface_energy_ratio']:.3g}" \
+                in body and r["setting"] in body
+    assert "built-in method" not in html
 
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
@@ -273,3 +307,19 @@ window.addEventListener("load", function () {
     assert console == [], console
     attrs = dict(re.findall(r'data-(\w+)="(\d+)"', proc.stdout.split("<body", 1)[1].split(">", 1)[0]))
     assert attrs.get("rows") == "2" and int(attrs.get("images", 0)) >= 5 and attrs.get("broken") == "0", attrs
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_docs_page_from_the_study(runs, tmp_path):
+    from harness.study.docs import write_docs
+
+    doc = tmp_path / "docs" / "results.md"
+    written = write_docs(runs["built"], runs["out"], doc=doc)
+    text = doc.read_text()
+    assert text.count("\n| thin_ring |") == 1 and text.count("\n| wide_slab |") == 1
+    assert runs["built"]["info"]["commit"] in text and "sslpv-harness study" in text
+    for name in ("pareto", "refine_k", "refine_n"):
+        assert (tmp_path / "docs" / "figures" / f"results_{name}.svg").is_file()
+        assert f"figures/results_{name}.png" in text
+    assert str(doc) in written

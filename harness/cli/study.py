@@ -36,9 +36,9 @@ def run(args):
         raise InputError("--out", "out", "is required", "give the study's folder, e.g. --out /tmp/study")
     size = args.size
     size = "own" if size is not None and size.strip().lower() == "own" else parse_size(size)
-    command = "sslpv-harness study " + " ".join(shlex.quote(a) for a in args.argv if a != "--json")
+    command = "sslpv-harness " + " ".join(shlex.quote(a) for a in args.argv if a != "--json")
     result = run_study(args.study, out, size=size, scheduler=args.scheduler, progress=not args.no_progress,
-                       cache=not args.no_cache, command=command)
+                       cache=not args.no_cache, command=command, rebuild=args.docs)
     built = result.pop("_built", None)
     if result["status"] != "finished":
         line = InputError(result["out"], "sweep", f"is incomplete: {result.get('error')}",

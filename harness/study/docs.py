@@ -24,7 +24,7 @@ def _md_cell(c):
     if c is None:
         return "–"
     mark = {"best": "**best**", "worse": "worse"}.get(c["status"], c["mark"])
-    return f"{c['values']} {mark}<br>`{c['setting']}`<br>{c['cost']}"
+    return f"{c['vals']} {mark}<br>`{c['setting']}`<br>{c['cost']}"
 
 
 def write_docs(built, out, doc=DOC):

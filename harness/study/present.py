@@ -20,7 +20,7 @@ def cell(c, metrics):
     vals = " / ".join(g(r.get(f"subsurface_{m}")) for m in metrics)
     k = f" K={r['K']}" if r["K"] is not None else ""
     cost = f"{g(r['frame_ms'])} ms, {g(r['work'], 2)} work"
-    return {"values": vals, "setting": r["setting"], "k": k.strip(), "cost": cost, "status": c["status"],
+    return {"vals": vals, "setting": r["setting"], "k": k.strip(), "cost": cost, "status": c["status"],
             "mark": STATUS_MARK[c["status"]]}
 
 

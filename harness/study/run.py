@@ -6,7 +6,8 @@ refused with one line before any work. Inside it:
 * ``sweep/``: the sweep's folder (``sweep.json``, ``store.sqlite``, ``renders/``), resumable: an
   interrupted study continues where it stopped when the same command is run again, and every
   configuration that the result cache (``cache/results``) holds is served from it, so a second run
-  with nothing changed renders nothing;
+  with nothing changed renders nothing; when nothing the outputs depend on changed at all
+  (:mod:`harness.study.memo`), the folder is served as it is, in seconds;
 * ``results.csv`` and ``results.parquet`` (:mod:`harness.study.table`), ``study.json`` (provenance:
   commit, GL renderer, package versions, the references' hashes and noise, the study file itself),
   ``index.html`` (the map) and ``figures/`` (SVG and PNG). Each is written atomically
@@ -97,7 +98,7 @@ def write_figures(out, rows, head, study):
     return names
 
 
-def build_outputs(out, study, summary, command):
+def build_outputs(out, study, summary, command, key=None):
     """The tables, figures, provenance and page of a finished sweep (see the module docstring)."""
     from harness.regression.verdict import ALPHA
     from harness.store import Store, git_commit, machine, versions
@@ -124,7 +125,7 @@ def build_outputs(out, study, summary, command):
             "references": _reference_info(summary["references"]), "store": summary["store"],
             "run_id": summary["run_id"], "configurations": len(rows), "reused": reused,
             "rendered": len(rows) - reused, "sweep_wall_s": summary.get("wall_s"), "alpha": ALPHA,
-            "figures": names, "limits": lims,
+            "figures": names, "limits": lims, "inputs_key": key,
             "headline": {s: {f: {"setting": c["row"]["setting"], "status": c["status"], "changes": c["changes"]}
                              for f, c in cells.items()} for s, cells in head["overall"].items()}}
     with atomic_write(out / "study.json") as tmp:
@@ -136,31 +137,53 @@ def build_outputs(out, study, summary, command):
     return {"rows": rows, "head": head, "limits": lims, "info": info}
 
 
-def run_study(study_path, out, size=None, scheduler=None, workers=None, progress=True, cache=True, command=None):
-    """Run the study (see the module docstring); returns the summary the command line prints."""
+def run_study(study_path, out, size=None, scheduler=None, workers=None, progress=True, cache=True, command=None,
+              rebuild=False):
+    """Run the study (see the module docstring); returns the summary the command line prints.
+
+    A folder that is up to date (:mod:`harness.study.memo`: nothing the outputs depend on changed) is
+    served as it is, unless ``rebuild`` (``--docs`` needs the tables in memory: they are rebuilt from the
+    store, without the sweep) or ``cache`` is False.
+    """
     from harness.runs.sweep import SweepConfig, run_sweep
+    from harness.study.memo import inputs_key, up_to_date
 
     t0 = time.perf_counter()
     study = load_study(study_path, size=size)
     out = Path(out).resolve()
     check_study_folder(out)
+    command = command or f"sslpv-harness study {study_path} --out {out}"
+    key = inputs_key(study, TEMPLATES, progress) if cache else None
+    prev = up_to_date(out, key)
+    if prev is not None:
+        result = {"out": str(out), "status": "finished", "unchanged": True, "configurations": prev["configurations"],
+                  "rendered": 0, "reused": prev["configurations"], "failed": 0, "sweep_wall_s": 0.0}
+        if rebuild:
+            summary = {"store": prev["store"], "run_id": prev["run_id"], "gl_renderer": prev["gl_renderer"],
+                       "references": {s: r["dir"] for s, r in prev["references"].items()}, "wall_s": 0.0}
+            result["_built"] = build_outputs(out, study, summary, command, key)
+        result.update(_paths(out, prev["configurations"], t0))
+        return result
     cfg = SweepConfig(scenes=study["scenes"], params=study["params"], out=str(out / "sweep"), size=study["size"],
                       kind="study")
     summary = run_sweep(cfg, scheduler=scheduler, workers=workers, progress=progress, cache=cache)
     check_study_folder(out, mark=True)
-    result = {"out": str(out), "status": summary["status"], "configurations": summary["configurations"],
-              "rendered": summary["ok"] - summary.get("reused", 0), "reused": summary.get("reused", 0),
-              "skipped_done": summary.get("skipped_done", 0), "failed": summary["failed"],
-              "sweep_wall_s": summary.get("wall_s")}
+    result = {"out": str(out), "status": summary["status"], "unchanged": False,
+              "configurations": summary["configurations"], "rendered": summary["ok"] - summary.get("reused", 0),
+              "reused": summary.get("reused", 0), "skipped_done": summary.get("skipped_done", 0),
+              "failed": summary["failed"], "sweep_wall_s": summary.get("wall_s")}
     if summary["status"] != "finished":
-        result["resume"] = command or f"sslpv-harness study {study_path} --out {out}"
+        result["resume"] = command
         result["error"] = summary.get("error") or summary.get("first_error")
         result["wall_s"] = round(time.perf_counter() - t0, 2)
         return result
-    built = build_outputs(out, study, summary, command or f"sslpv-harness study {study_path} --out {out}")
-    result.update({"index": str(out / "index.html"), "csv": str(out / "results.csv"),
-                   "parquet": str(out / "results.parquet"), "study_json": str(out / "study.json"),
-                   "figures": str(out / "figures"), "rows": len(built["rows"]),
-                   "wall_s": round(time.perf_counter() - t0, 2)})
+    built = build_outputs(out, study, summary, command, key)
+    result.update(_paths(out, len(built["rows"]), t0))
     result["_built"] = built
     return result
+
+
+def _paths(out, rows, t0):
+    return {"index": str(out / "index.html"), "csv": str(out / "results.csv"),
+            "parquet": str(out / "results.parquet"), "study_json": str(out / "study.json"),
+            "figures": str(out / "figures"), "rows": rows, "wall_s": round(time.perf_counter() - t0, 2)}
