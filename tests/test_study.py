@@ -110,11 +110,12 @@ def test_out_that_is_not_ours_is_refused(tmp_path, capsys):
     assert line.startswith("error: --out: out: is required")
 
 
-def test_default_study_is_valid():
+@pytest.mark.parametrize("name", ["default", "full"])
+def test_committed_studies_are_valid(name):
     from harness.scene import list_scenes
     from harness.study.spec import load_study
 
-    s = load_study(REPO / "studies" / "default.toml")
+    s = load_study(REPO / "studies" / f"{name}.toml")
     assert s["scenes"] == list_scenes() and s["size"] == "small"
     assert {c["family"] for c in s["calibrations"]} == {"diffusion", "collision"}
     assert {p.get("method", "sslpv") for p in s["params"]} == {"sslpv", "dipole", "dirpole"}
