@@ -324,3 +324,20 @@ def test_docs_page_from_the_study(runs, tmp_path):
         assert (tmp_path / "docs" / "figures" / f"results_{name}.svg").is_file()
         assert f"figures/results_{name}.png" in text
     assert str(doc) in written
+
+
+def test_a_study_killed_in_its_first_sweep_is_ours(tmp_path, capsys):
+    """The folder of a study killed before its marker was written holds only its sweep: it is resumed, not
+    refused; a folder with anything else is refused."""
+    from harness.errors import InputError
+    from harness.io.outputs import SWEEP_MARKER
+    from harness.study.run import check_study_folder
+
+    out = tmp_path / "killed"
+    (out / "sweep").mkdir(parents=True)
+    (out / "sweep" / SWEEP_MARKER).touch()
+    check_study_folder(out)
+    other = tmp_path / "other"
+    (other / "sweep").mkdir(parents=True)
+    with pytest.raises(InputError, match="not a study's folder"):
+        check_study_folder(other)
