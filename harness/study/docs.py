@@ -45,7 +45,9 @@ def write_docs(built, out, doc=DOC):
     lines = [
         "# Results: how far SSLPV is from Mitsuba 3 ground truth",
         "",
-        f"Written by `{info['command']}` at commit `{info['commit']}`{dirty}, GL renderer `{info['gl_renderer']}`, "
+        f"Written by `{info['command']}` from the study's sweep at commit `{info['commit']}`"
+        + (f" (this page by the code at `{info['commit_now']}`)" if info.get("commit_now") not in (None, info["commit"])
+           else "") + f"{dirty}, GL renderer `{info['gl_renderer']}`, "
         f"from the study file `{info['study_path']}` (sha256 `{info['study_sha256'][:12]}`): "
         f"{info['configurations']} configurations ({info['rendered']} rendered in that run, {info['reused']} "
         "served from the result cache). Do not edit by hand: run the command again.",

@@ -116,7 +116,8 @@ def build_outputs(out, study, summary, command, key=None):
                   images)
     names = write_figures(out, rows, head, study)
     reused = sum(r["cached"] for r in rows)
-    info = {"title": study["title"], "commit": run.get("git_commit") or git_commit(), "dirty": _dirty(Path(__file__)
+    info = {"title": study["title"], "commit": run.get("git_commit") or git_commit(), "commit_now": git_commit(),
+            "dirty": _dirty(Path(__file__)
             .resolve().parents[2]), "gl_renderer": run.get("gl_renderer") or summary.get("gl_renderer"),
             "versions": versions(), "machine": machine(), "command": command, "study_path": study["path"],
             "study_sha256": study["sha256"], "study_text": study["text"], "size": study["size"],
