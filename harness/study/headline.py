@@ -40,7 +40,8 @@ def family_order(rows):
 
 
 def best_cells(rows, budget, metric):
-    """``{(scene, K): {family: row}}`` per budget K, and ``{scene: {family: row}}`` over all budgets."""
+    """``{(scene, K): {family: row}}`` per budget K, and ``{scene: {family: row}}`` over all budgets
+    (SSLPV rows outside the budgets, such as other N, compete in neither)."""
     per_k, overall = {}, {}
     ks = [str(k) for k in budget["steps"]]
     for r in rows:

@@ -37,9 +37,11 @@ def _same_but(rows, subject, **change):
     return None
 
 
-def subject_of(rows, scene, metric):
-    """The scene's best SSLPV row by ``metric`` (None without SSLPV rows)."""
-    cand = [r for r in rows if r["scene"] == scene and r["method"] == "sslpv"]
+def subject_of(rows, scene, metric, budget):
+    """The scene's best SSLPV row by ``metric`` within the budgets (None without one)."""
+    ks = {str(k) for k in budget["steps"]}
+    cand = [r for r in rows if r["scene"] == scene and r["method"] == "sslpv" and r["N"] == budget["grid"]
+            and r["K"] in ks]
     return min(cand, key=lambda r: _rank_value(r, metric)) if cand else None
 
 
@@ -131,7 +133,7 @@ def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
     images = images or _Images()
     out = {}
     for scene in scenes:
-        s = subject_of(rows, scene, metric)
+        s = subject_of(rows, scene, metric, budget)
         if s is None:
             continue
         out[scene] = {"subject": s["setting"], "relmse": s["subsurface_relmse"],
