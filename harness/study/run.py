@@ -117,8 +117,7 @@ def build_outputs(out, study, summary, command, key=None):
     names = write_figures(out, rows, head, study)
     reused = sum(r["cached"] for r in rows)
     info = {"title": study["title"], "commit": run.get("git_commit") or git_commit(), "commit_now": git_commit(),
-            "dirty": _dirty(Path(__file__)
-            .resolve().parents[2]), "gl_renderer": run.get("gl_renderer") or summary.get("gl_renderer"),
+            "dirty": _dirty(Path(__file__).resolve().parents[2]), "gl_renderer": run.get("gl_renderer") or summary.get("gl_renderer"),
             "versions": versions(), "machine": machine(), "command": command, "study_path": study["path"],
             "study_sha256": study["sha256"], "study_text": study["text"], "size": study["size"],
             "budget": study["budget"], "metrics": study["metrics"], "significance": study["significance"],
@@ -129,12 +128,13 @@ def build_outputs(out, study, summary, command, key=None):
             "figures": names, "limits": lims, "inputs_key": key,
             "headline": {s: {f: {"setting": c["row"]["setting"], "status": c["status"], "changes": c["changes"]}
                              for f, c in cells.items()} for s, cells in head["overall"].items()}}
-    with atomic_write(out / "study.json") as tmp:
-        tmp.write_text(json.dumps(info, indent=1, default=str))
     _render_page(out / "index.html", info=info, head=head, metrics=study["metrics"], budget=study["budget"],
                  significance=study["significance"], alpha=ALPHA, figures=names,
                  headline_rows=headline_rows(head, study["metrics"]), budget_rows=budget_rows(head, study["metrics"]),
                  limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims])
+    # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output
+    with atomic_write(out / "study.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=1, default=str))
     return {"rows": rows, "head": head, "limits": lims, "info": info}
 
 
