@@ -173,7 +173,7 @@ def refine_n(rows, scenes, families, metric, budget, folder):
 
 
 def _tonemap(rgb, scale):
-    return np.clip((np.asarray(rgb, dtype=np.float64) * scale) ** (1 / 2.2), 0.0, 1.0)
+    return np.clip(np.asarray(rgb, dtype=np.float64) * scale, 0.0, 1.0) ** (1 / 2.2)   # negative radiance: black
 
 
 def images(scene, cells, families, folder, eps=1e-2):
