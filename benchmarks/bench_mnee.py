@@ -25,7 +25,7 @@ Parts (``--part``, default all but ``time``, ``rough`` and ``eta2``, which take 
                 of the smooth scenes: energy ratio and relMSE of the subsurface image.
 
 Usage: ``.venv/bin/python benchmarks/bench_mnee.py [--part halfspace eta1 ...] [--variant cuda_ad_rgb]``.
-Every figure in the README's section on the exact dielectric reference is printed by this script.
+Every figure in docs/benchmarks.md's section on the exact dielectric reference is printed by this script.
 """
 
 import argparse

@@ -11,7 +11,7 @@ budget (default: the steady state, i.e. converged steps):
   per scene that misses the energy range, what the calibration says stops it;
 * the fitted values of every budget with their standard errors.
 
-It computes nothing: every figure is the calibration's own, so that the README quotes what
+It computes nothing: every figure is the calibration's own, so that docs/benchmarks.md quotes what
 ``calibrate`` measured.
 
 Run: ``.venv/bin/python benchmarks/calibration_table.py DIR [--budget "N=32 steps=steady"]``

@@ -13,14 +13,14 @@ import json
 import re
 import sys
 
-from harness.cli import baselines, calibrate, compare, export, nightly, reference, render, report, scenes, sweep
+from harness.cli import baselines, calibrate, compare, export, nightly, reference, render, report, scenes, study, sweep
 from harness.errors import EnvironmentProblem, InputError, ResultRefused
 
 #: ``(name, module)`` of every command, in the order ``--help`` lists them.
 COMMANDS = [
     ("scenes", scenes), ("reference", reference), ("render", render), ("compare", compare),
     ("sweep", sweep), ("report", report), ("export", export), ("nightly", nightly), ("baselines", baselines),
-    ("calibrate", calibrate),
+    ("calibrate", calibrate), ("study", study),
 ]
 
 

@@ -411,6 +411,11 @@ MUTATIONS = (
              "limit = min(MAX_SAMPLES, MAX_FRAME_PAIRS // max(int(pixels), 1))", "limit = MAX_SAMPLES",
              ("tests/test_methods.py::TestSizingRule",),
              "the dense sizing rule forgets the per-frame pair budget (marble_sphere keeps a spacing that is refused)"),
+    Mutation("study_energy_ratio_times_1_001", "metric", "harness/metrics/pixel.py",
+             "    ratio = sx / sy\n", "    ratio = sx / sy * 1.001\n",
+             ("tests/test_study.py::test_csv_row_recomputes_with_numpy",),
+             "the energy ratio x 1.001: the study's results.csv changes and its rows no longer agree with a NumPy "
+             "recomputation from their paths"),
     Mutation("compare_every_pixel", "metric", "harness/cli/compare.py",
              "    mask = comparison_mask(coverage)\n", "    mask = np.ones_like(comparison_mask(coverage))\n",
              ("tests/test_compare.py::test_render_then_compare_equals_the_sweep",),

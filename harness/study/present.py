@@ -1,0 +1,99 @@
+"""The study's findings as text: table cells and the "what limits SSLPV" sentences, shared by the page
+(:mod:`harness.study.page`) and ``docs/results.md`` (:mod:`harness.study.docs`), so both say the same.
+
+Every number is formatted from the results here; nothing is typed by hand.
+"""
+
+STATUS_MARK = {"best": "best", "tied": "≈", "worse": "worse", "better-in-part": "≈+", "mixed": "±", "unjudged": "?"}
+
+
+def g(x, digits=3):
+    """A number in ``digits`` significant figures; ``–`` for None."""
+    if x is None or x == "":
+        return "–"
+    return f"{float(x):.{digits}g}"
+
+
+def cell(c, metrics):
+    """One judged cell -> ``{"values", "setting", "cost", "status", "mark"}`` as text."""
+    r = c["row"]
+    vals = " / ".join(g(r.get(f"subsurface_{m}")) for m in metrics)
+    k = f" K={r['K']}" if r["K"] is not None else ""
+    cost = f"{g(r['frame_ms'])} ms, {g(r['work'], 2)} work"
+    return {"vals": vals, "setting": r["setting"], "k": k.strip(), "cost": cost, "status": c["status"],
+            "mark": STATUS_MARK[c["status"]]}
+
+
+def floors(cells, metrics):
+    """The scene's noise floors of ``metrics`` (the same for every row of a scene)."""
+    r = next(iter(cells.values()))["row"] if cells else {}
+    return " / ".join(g(r.get(f"subsurface_{m}_floor")) for m in metrics)
+
+
+def headline_rows(head, metrics):
+    """``[{"scene", "floor", "cells": [cell or None per family]}]`` of the one-row-per-scene table."""
+    out = []
+    for scene in head["scenes"]:
+        cells = head["overall"].get(scene, {})
+        out.append({"scene": scene, "floor": floors(cells, metrics),
+                    "cells": [cell(cells[f], metrics) if f in cells else None for f in head["families"]]})
+    return out
+
+
+def budget_rows(head, metrics):
+    """``[{"scene", "k", "floor", "cells"}]`` of the per-budget table."""
+    out = []
+    for scene in head["scenes"]:
+        for k in head["ks"]:
+            cells = head["per_budget"].get(scene, {}).get(k)
+            if not cells:
+                continue
+            out.append({"scene": scene, "k": k, "floor": floors(cells, metrics),
+                        "cells": [cell(cells[f], metrics) if f in cells else None for f in head["families"]]})
+    return out
+
+
+def _pm(d):
+    return f"{d['delta']:+.3g} ± {d['se']:.2g}" if "delta" in d else "(no SE)"
+
+
+def limit_lines(lim):
+    """The decompositions of one scene (:func:`harness.study.limits.limits`) as sentences."""
+    out = [f"Best SSLPV setting: {lim['subject']} (relMSE {g(lim['relmse'])}, noise floor {g(lim['floor'])})."]
+    s = lim["steps"]
+    if s["measured"]:
+        r, e = s["relmse"], s["energy_ratio"]
+        out.append(f"Steps not converged: at {s['at']} relMSE {g(r['at_k'])}, energy ratio {g(e['at_k'])}; its "
+                   f"steady state {g(r['steady'])}, {g(e['steady'])}; change in badness (steady − K, paired, "
+                   f"± SE): relMSE {_pm(r)}, |E − 1| {_pm(e)}.")
+    else:
+        out.append(f"Steps not converged: not measured ({s['why']}).")
+    o = lim["outside"]
+    if o["measured"]:
+        line = (f"Light outside the object: {100 * o['outside_share']:.1f} % of the accumulated energy lies in cells "
+                "outside the mesh (the renderer's diagnostic)")
+        if o["other_modes"]:
+            line += "; with outside = " + ", ".join(
+                f"{m['outside']}: relMSE {g(m['relmse'])}, E {g(m['energy_ratio'])}" for m in o["other_modes"])
+        out.append(line + ".")
+    else:
+        out.append(f"Light outside the object: not measured ({o['why']}).")
+    b = lim["boundary"]
+    if b["measured"]:
+        for p in b["pairs"]:
+            im, di = p["index_matched"], p["dielectric"]
+            out.append(f"Boundary ({p['setting']}): index-matched {im['scene']} relMSE {g(im['relmse'])} (floor "
+                       f"{g(im['floor'])}), E {g(im['energy_ratio'])}; dielectric {di['scene']} relMSE "
+                       f"{g(di['relmse'])} (floor {g(di['floor'])}), E {g(di['energy_ratio'])} (two references: "
+                       "no paired SE).")
+    else:
+        out.append(f"Boundary: not measured ({b['why']}).")
+    m = lim["mapping"]
+    if m["measured"]:
+        for f in m["fits"]:
+            out.append(f"Mapping (calibrated {f['family']}, {f['budget']}, from its calibration.json): relMSE "
+                       f"in-sample {g(f['in_sample'])}, held out {g(f['held_out'])} (E {g(f['in_sample_energy'])} / "
+                       f"{g(f['held_out_energy'])}).")
+    else:
+        out.append(f"Mapping: not measured ({m['why']}).")
+    return out
