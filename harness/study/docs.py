@@ -42,13 +42,16 @@ def write_docs(built, out, doc=DOC):
                 shutil.copyfile(Path(out) / "figures" / f"{name}.{ext}", tmp)
             written.append(str(target))
     dirty = " (working tree with uncommitted changes)" if info.get("dirty") else ""
+    study_path = Path(info["study_path"])
+    if study_path.is_absolute() and study_path.is_relative_to(paths.REPO):
+        study_path = study_path.relative_to(paths.REPO)        # the same page from any clone
     lines = [
         "# Results: how far SSLPV is from Mitsuba 3 ground truth",
         "",
         f"Written by `{info['command']}` from the study's sweep at commit `{info['commit']}`"
         + (f" (this page by the code at `{info['commit_now']}`)" if info.get("commit_now") not in (None, info["commit"])
            else "") + f"{dirty}, GL renderer `{info['gl_renderer']}`, "
-        f"from the study file `{info['study_path']}` (sha256 `{info['study_sha256'][:12]}`): "
+        f"from the study file `{study_path}` (sha256 `{info['study_sha256'][:12]}`): "
         f"{info['configurations']} configurations ({info['rendered']} rendered in that run, {info['reused']} "
         "served from the result cache). Do not edit by hand: run the command again.",
         "",
