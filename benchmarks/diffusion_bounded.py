@@ -1,0 +1,71 @@
+"""The ``diffusion`` mapping in bounded objects against diffusion theory (issue 28, Sec. 1).
+
+Prints, for a slab (Eq. (D1) of :mod:`sslpv_gl.bounded`) and a sphere with a point
+source at its centre (Eq. (D2)), the lattice's fluxes through the extrapolated
+boundary against the diffusion solution with the same boundary, at N = 32 and 64.
+The slab rows also run the render's injection (Eq. 1's lobe in the first inside
+cell, ``lobe``) against the dipole's source at one transport mean free path: the
+source-depth term of the back-lit deficit (``docs/diffusion_mapping.md``, Sec. 7).
+
+    python benchmarks/diffusion_bounded.py            # slabs, and spheres at N = 32
+    python benchmarks/diffusion_bounded.py --sphere64 # also the spheres at N = 64 (minutes)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sslpv_gl import bounded  # noqa: E402
+
+#: (sigma_t, albedo, g) in units of the slab's thickness: the back-lit sphere of issue 28
+#: (4.5 reduced mean free paths across, albedo 0.99, g = 0.3), a more absorbing slab, a dense one
+SLABS = [(4.5 / 0.703, 0.99, 0.3), (10.0 / 0.91, 0.9, 0.0), (20.0, 0.99, 0.0)]
+#: (sigma_t, albedo, g) in units of the sphere's radius, one per colour of one solve
+SPHERES = [(2.25 / 0.703, 0.99, 0.3), (7.5 / 0.703, 0.99, 0.3), (10.0, 0.9, 0.0)]
+
+
+def slab_rows():
+    print("slab (N cells across), plane source; R, T = flux through the near / far extrapolated boundary")
+    print(f"{'medium (st, a, g)':>24} {'N':>3} {'source':>6} {'kappa':>6} {'zb/dx':>6} "
+          f"{'R lat':>7} {'R diff':>7} {'ratio':>6} {'T lat':>7} {'T diff':>7} {'ratio':>6}")
+    for med in SLABS:
+        for N in (32, 64):
+            for lobe in (False, True):
+                r = bounded.slab_lattice(*med, N, lobe=lobe)
+                name = f"({med[0]:.2f}, {med[1]}, {med[2]})"
+                print(f"{name:>24} {N:>3} {'lobe' if lobe else 'iso':>6} {r['kappa']:6.3f} {r['zb'] / r['dx']:6.2f} "
+                      f"{r['R']:7.4f} {r['R_diff']:7.4f} {r['R'] / r['R_diff']:6.3f} "
+                      f"{r['T']:7.4f} {r['T_diff']:7.4f} {r['T'] / r['T_diff']:6.3f}")
+
+
+def sphere_rows(N):
+    t = time.perf_counter()
+    out, info = bounded.sphere_lattice(SPHERES, N)
+    for med, o in zip(SPHERES, out):
+        name = f"({med[0]:.2f}, {med[1]}, {med[2]})"
+        print(f"{name:>24} {N:>3} {o['kappa']:6.3f} {o['zb'] * N / 2:6.2f} {o['escape']:7.4f} {o['escape_diff']:7.4f} "
+              f"{o['escape'] / o['escape_diff']:6.3f}   {o['ratio'].min():.3f}..{o['ratio'].max():.3f}")
+    print(f"    (N = {N}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sphere64", action="store_true", help="also solve the spheres at N = 64 (minutes)")
+    args = ap.parse_args(argv)
+    slab_rows()
+    print("\nsphere (N cells across), point source at the centre; escape = flux through the extrapolated sphere;")
+    print("phi ratio = lattice / diffusion fluence over the inside cells with 3 <= r/dx <= a/dx - 3")
+    print(f"{'medium (st, a, g)':>24} {'N':>3} {'kappa':>6} {'zb/dx':>6} {'esc lat':>7} {'esc dif':>7} "
+          f"{'ratio':>6}   phi ratio")
+    sphere_rows(32)
+    if args.sphere64:
+        sphere_rows(64)
+
+
+if __name__ == "__main__":
+    main()
