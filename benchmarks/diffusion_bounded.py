@@ -4,8 +4,9 @@ Prints, for a slab (Eq. (D1) of :mod:`sslpv_gl.bounded`) and a sphere with a poi
 source at its centre (Eq. (D2)), the lattice's fluxes through the extrapolated
 boundary against the diffusion solution with the same boundary, at N = 32 and 64.
 The slab rows also run the render's injection (Eq. 1's lobe in the first inside
-cell, ``lobe``) against the dipole's source at one transport mean free path: the
-source-depth term of the back-lit deficit (``docs/diffusion_mapping.md``, Sec. 7).
+cell, ``lobe``) against the dipole's source at one transport mean free path, and a
+second table splits the back-lit deficit into its terms: boundary mode, source depth
+and how the render reads the far side (``docs/diffusion_mapping.md``, Sec. 7).
 
     python benchmarks/diffusion_bounded.py            # slabs, and spheres at N = 32
     python benchmarks/diffusion_bounded.py --sphere64 # also the spheres at N = 64 (minutes)
@@ -43,6 +44,24 @@ def slab_rows():
                       f"{r['T']:7.4f} {r['T_diff']:7.4f} {r['T'] / r['T_diff']:6.3f}")
 
 
+def deficit_rows():
+    """The back-lit deficit's terms on the slab: boundary mode x source, against Eq. (D1)'s T."""
+    print("back-lit slab terms (medium of the first row above): T = flux into the far sinks; T render = "
+          "pi L A / P as the render reads the far side (last inside cell: Eq. (21) scale; first outside cell: "
+          "Eq. (21) in the extrapolated layer, 1 in a sink)")
+    print(f"{'outside':>12} {'source':>18} {'N':>3} {'T lat':>7} {'T diff':>7} {'ratio':>6} "
+          f"{'T rend in':>9} {'T rend out':>10} {'out/diff':>8}")
+    med = SLABS[0]
+    for outside in ("extrapolated", "absorb"):
+        for label, kw in (("iso at 1 mfp'", {}), ("lobe at surface", {"lobe": True}),
+                          ("lobe at 1 mfp'", {"lobe": True, "lobe_depth_mfp": 1.0})):
+            for N in (32, 64):
+                r = bounded.slab_lattice(*med, N, outside=outside, **kw)
+                print(f"{outside:>12} {label:>18} {N:>3} {r['T']:7.4f} {r['T_diff']:7.4f} "
+                      f"{r['T'] / r['T_diff']:6.3f} {r['T_render_in']:9.4f} {r['T_render_out']:10.4f} "
+                      f"{r['T_render_out'] / r['T_diff']:8.3f}")
+
+
 def sphere_rows(N):
     t = time.perf_counter()
     out, info = bounded.sphere_lattice(SPHERES, N)
@@ -58,6 +77,8 @@ def main(argv=None):
     ap.add_argument("--sphere64", action="store_true", help="also solve the spheres at N = 64 (minutes)")
     args = ap.parse_args(argv)
     slab_rows()
+    print()
+    deficit_rows()
     print("\nsphere (N cells across), point source at the centre; escape = flux through the extrapolated sphere;")
     print("phi ratio = lattice / diffusion fluence over the inside cells with 3 <= r/dx <= a/dx - 3")
     print(f"{'medium (st, a, g)':>24} {'N':>3} {'kappa':>6} {'zb/dx':>6} {'esc lat':>7} {'esc dif':>7} "

@@ -47,7 +47,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import boundary, lattice
-from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, propagation_matrices, scatter_factors
+from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
 
 __all__ = ["slab_diffusion", "sphere_diffusion", "slab_operator", "slab_lattice", "sphere_lattice"]
 
@@ -110,7 +110,8 @@ def _steady(P, P1, c0):
     return spla.spsolve((sp.identity(n, format="csc") - P).tocsc(), P1 @ c0)
 
 
-def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=False, outside="extrapolated"):
+def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=False, outside="extrapolated",
+                 lobe_depth_mfp=None):
     """The ``diffusion`` lattice's slab of ``N`` cells -> dict of lattice and diffusion R, T.
 
     The slab is ``N`` cells thick (``dx = d / N`` for ``d = 1``; lengths scale out of
@@ -118,9 +119,15 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     layer and sink cells. The source is a plane of ``c00`` in the cell whose centre is
     nearest ``depth_mfp / sigma_t'`` below the lit face (Eq. (D1) uses that centre's
     depth), or with ``lobe=True`` the render's injection: Eq. 1's clamped-cosine lobe
-    pointing into the slab, in the first inside cell. Returns ``R``, ``T`` (lattice:
-    flux into the sinks on each side over the injected flux), ``R_diff``, ``T_diff``
-    (Eq. (D1)), ``z0``, ``zb``, ``dx``, ``kappa`` (``sigma_tr dx``).
+    pointing into the slab, in the first inside cell (or ``lobe_depth_mfp / sigma_t'``
+    deep: ``inject_offset``). ``outside`` is the boundary mode (``extrapolated`` or
+    ``absorb``). Returns ``R``, ``T`` (lattice: flux into the sinks on each side over
+    the injected flux), ``R_diff``, ``T_diff`` (Eq. (D1), the source at ``z0``), ``z0``,
+    ``zb``, ``dx``, ``kappa`` (``sigma_tr dx``), ``T_render``: the far side's exitant
+    radiance as the render reads it, ``pi L A / P`` (``P`` the injected power per cell,
+    ``L`` Eq. 5-7 times the cell's radiance scale: Eq. (21) in medium cells, 1 in sinks),
+    in the last inside cell (``T_render_in``) and the first outside cell
+    (``T_render_out``), and the arrays ``accum`` and ``pad``.
     """
     d = 1.0
     dx = d / int(N)
@@ -139,7 +146,8 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     _, sigma_tp, _, _ = _coefficients(sigma_t, albedo, g)
     c0 = np.zeros(4 * n)
     if lobe:
-        i0 = pad
+        depth = 0 if lobe_depth_mfp is None else int(np.floor(lobe_depth_mfp / sigma_tp / dx))
+        i0 = pad + int(np.clip(depth, 0, int(N) - 1))
         c0[4 * i0:4 * i0 + 4] = clamped_cosine_coeffs(np.array([1.0, 0.0, 0.0])) / np.pi
         z0 = 1.0 / sigma_tp                          # the dipole's source depth, for the diffusion column
     else:
@@ -150,9 +158,16 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     sinks = emit == 0
     left, right = sinks & (np.arange(n) < pad), sinks & (np.arange(n) >= pad + int(N))
     R_d, T_d = slab_diffusion(sigma_t, albedo, g, d, z0, zb)
+    power = np.sqrt(4.0 * np.pi) * c0[4 * i0]        # per cell (P = sqrt(4 pi) c00)
+    n_out = np.array([1.0, 0.0, 0.0])
+
+    def read(i):
+        scale = float(m["radiance_scale"]) if keep[i] > 0 else 1.0
+        return float(np.pi * scale * hemisphere_radiance(acc[i], n_out, dx * dx) * dx * dx / power)
+
     return {"R": acc[left, 0].sum() / c0[4 * i0], "T": acc[right, 0].sum() / c0[4 * i0],
             "R_diff": R_d, "T_diff": T_d, "z0": z0, "zb": zb, "dx": dx, "kappa": float(m["kappa"]),
-            "accum": acc, "pad": pad}
+            "T_render_in": read(pad + int(N) - 1), "T_render_out": read(pad + int(N)), "accum": acc, "pad": pad}
 
 
 def sphere_lattice(media, N, rtol=1e-9):
