@@ -157,8 +157,8 @@ MUTATIONS = (
 
     # ------------------------------------------------------------------ Python physics
     Mutation("twin_beer_1_03", "physics", "sslpv_gl/twin.py",
-             "atten.append(np.exp(-0.5 * (sig_s + sig) * dxs[axis]))",
-             "atten.append(np.exp(-0.515 * (sig_s + sig) * dxs[axis]))",
+             "a = np.exp(-0.5 * (sig_s + sig) * dxs[axis])",
+             "a = np.exp(-0.515 * (sig_s + sig) * dxs[axis])",
              (f"{TW}::TestPropagate::test_absorption_only_scales_by_beer",),
              "twin: Beer-Lambert between cells x 1.03 in the exponent"),
     Mutation("upload_half_absorption_1_03", "physics", "sslpv_gl/propagate.py",
@@ -405,7 +405,7 @@ MUTATIONS = (
              "the extrapolated boundary's z_b = A D instead of 2 A D (Eq. (B3))"),
     Mutation("extrapolated_layer_one_cell_thin", "physics", "sslpv_gl/boundary.py",
              "layer = (dist[..., None] - 0.5) <= zb", "layer = (dist[..., None] + 0.5) <= zb",
-             ("tests/test_diffusion_bounded.py::TestSlab",),
+             ("tests/test_diffusion_bounded.py::TestSphere",),
              "the extrapolated layer ends one cell short of z_b"),
     Mutation("twin_interior_cuts_every_empty_destination", "physics", "sslpv_gl/twin.py",
              "a = a * (1.0 - _shift_from(emp, offset) * emp)", "a = a * (1.0 - emp)",
