@@ -127,7 +127,8 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     radiance as the render reads it, ``pi L A / P`` (``P`` the injected power per cell,
     ``L`` Eq. 5-7 times the cell's radiance scale: Eq. (21) in medium cells, 1 in sinks),
     in the last inside cell (``T_render_in``) and the first outside cell
-    (``T_render_out``), and the arrays ``accum`` and ``pad``.
+    (``T_render_out``; ``T_render_out_R`` with Eq. (21)'s scale in a sink too, as before
+    issue 28), and the arrays ``accum`` and ``pad``.
     """
     d = 1.0
     dx = d / int(N)
@@ -161,13 +162,14 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     power = np.sqrt(4.0 * np.pi) * c0[4 * i0]        # per cell (P = sqrt(4 pi) c00)
     n_out = np.array([1.0, 0.0, 0.0])
 
-    def read(i):
-        scale = float(m["radiance_scale"]) if keep[i] > 0 else 1.0
+    def read(i, sink_scale=1.0):
+        scale = float(m["radiance_scale"]) if keep[i] > 0 else sink_scale
         return float(np.pi * scale * hemisphere_radiance(acc[i], n_out, dx * dx) * dx * dx / power)
 
     return {"R": acc[left, 0].sum() / c0[4 * i0], "T": acc[right, 0].sum() / c0[4 * i0],
             "R_diff": R_d, "T_diff": T_d, "z0": z0, "zb": zb, "dx": dx, "kappa": float(m["kappa"]),
-            "T_render_in": read(pad + int(N) - 1), "T_render_out": read(pad + int(N)), "accum": acc, "pad": pad}
+            "T_render_in": read(pad + int(N) - 1), "T_render_out": read(pad + int(N)),
+            "T_render_out_R": read(pad + int(N), float(m["radiance_scale"])), "accum": acc, "pad": pad}
 
 
 def sphere_lattice(media, N, rtol=1e-9):
