@@ -5,7 +5,8 @@
 * the rule itself: light in an empty cell reaches only inside neighbours, and the
   vacuum lattice splits exactly into the ``interior`` lattice plus the paths that
   crossed between empty cells (both non-negative for non-negative band-0 light);
-* the GL propagation against the twin (``gl`` marker), as ``test_gl_vs_twin_modes.py``.
+* the GL propagation against the twin (``gl`` marker), as ``test_gl_vs_twin_modes.py``, and a
+  whole back-lit render's accumulation (K steps on GL, and ``steps = steady`` on the host).
 """
 
 import numpy as np
@@ -97,3 +98,34 @@ class TestGL:
         # power: without the rule the grids differ far beyond the tolerance
         _, acc_vac = twin.propagate(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], DX, 9, 2)
         assert np.abs(acc_vac - ref_acc).max() > 100 * RTOL_GRID * np.abs(ref_acc[..., 0]).max()
+
+    @pytest.mark.parametrize("steps", [10, "steady"])
+    def test_render_accumulation_matches_twin(self, gl_renderer, steps):
+        """A whole back-lit render under interior (and the diffusion mapping): GL, or the host's steady solve,
+        against the twin's accumulation (steady: the twin iterated until the grid is empty)."""
+        from harness.scene import load_scene
+        from sslpv_gl.params import SSLPVParams
+
+        scene = load_scene("backlit_slab").with_resolution(32, 32)
+        params = SSLPVParams(N=16, steps=steps, mapping="diffusion", outside="interior", skip=0, rsm_size=256,
+                             inject_size=64)
+        gl_renderer.render(scene, params)
+        accum = gl_renderer.read_accumulation(params)
+        mat = gl_renderer.lpv_material(scene, params)
+        assert "empty" in mat
+        texels = gl_renderer.rsm_texels(scene, params)
+        med = scene.medium
+        c0 = sum(twin.inject(t, light.position, med.bbox_min, med.bbox_max, params.N, scene.boundary.eta)
+                 for t, light in zip(texels, scene.lights))
+        dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
+        if steps == "steady":
+            ref, k, left = steady.propagate_until(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], dx, tol=1e-7,
+                                                  max_steps=20000, skip=0, emit=mat["emit"], empty=mat["empty"])
+            assert left < 1e-7, (k, left)
+        else:
+            _, ref = twin.propagate(c0, mat["sigma_lpv"], mat["sigma_s_prime"], mat["g"], dx, steps, 0,
+                                    emit=mat["emit"], empty=mat["empty"])
+        scale = float(np.abs(ref[..., 0]).max())
+        err = float(np.abs(accum - ref).max())
+        print(f"interior render K={steps}: max|GL - twin| / max|c00| = {err / scale:.2e}")
+        assert err <= (1e-4 if steps != "steady" else 1e-5) * scale

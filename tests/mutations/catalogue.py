@@ -423,4 +423,8 @@ MUTATIONS = (
              "radiance_scale = np.where(keep > 0, radiance_scale, 1.0)", "radiance_scale = radiance_scale * 1.0",
              ("tests/test_diffusion_bounded.py::TestSinkRadiance",),
              "diffusion mapping: Eq. (21)'s fluence scale applied to the flux in sink and empty cells"),
+    Mutation("renderer_steady_ignores_interior", "physics", "sslpv_gl/renderer.py",
+             'emit=material["emit"], empty=material.get("empty"))', 'emit=material["emit"])',
+             ("tests/test_outside_interior.py::TestGL::test_render_accumulation_matches_twin",),
+             "steps = steady: the host solve forgets outside = interior's empty cells"),
 )
