@@ -1,7 +1,7 @@
 """The ``diffusion`` mapping in bounded objects against diffusion theory (issue 28, Sec. 1).
 
-Prints, for a slab (Eq. (D1) of :mod:`sslpv_gl.bounded`) and a sphere with a point
-source at its centre (Eq. (D2)), the lattice's fluxes through the extrapolated
+Prints, for a slab (Eq. (D1) of :mod:`sslpv_gl.bounded`), a sphere with a point
+source at its centre (Eq. (D2)) and one lit from one side (Eq. (D2')), the lattice's fluxes through the extrapolated
 boundary against the diffusion solution with the same boundary, at N = 32 and 64.
 The slab rows also run the render's injection (Eq. 1's lobe in the first inside
 cell, ``lobe``) against the dipole's source at one transport mean free path, and a
@@ -72,6 +72,17 @@ def sphere_rows(N):
     print(f"    (N = {N}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
 
 
+def side_rows(N):
+    t = time.perf_counter()
+    out, info = bounded.sphere_lattice(SPHERES, N, depth_mfp=1.0)
+    for med, o in zip(SPHERES, out):
+        name = f"({med[0]:.2f}, {med[1]}, {med[2]})"
+        print(f"{name:>24} {N:>3} {o['kappa']:6.3f} {o['zb'] * N / 2:6.2f} {o['escape']:7.4f} {o['escape_diff']:7.4f} "
+              f"{o['escape'] / o['escape_diff']:6.3f} {o['escape_far']:7.4f} {o['escape_far_diff']:7.4f} "
+              f"{o['escape_far'] / o['escape_far_diff']:6.3f}")
+    print(f"    (N = {N}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sphere64", action="store_true", help="also solve the spheres at N = 64 (minutes)")
@@ -86,6 +97,13 @@ def main(argv=None):
     sphere_rows(32)
     if args.sphere64:
         sphere_rows(64)
+    print("\nsphere lit from one side: point source one reduced mean free path below the +x pole (Eq. (D2')); "
+          "far = flux through the far hemisphere (x < 0)")
+    print(f"{'medium (st, a, g)':>24} {'N':>3} {'kappa':>6} {'zb/dx':>6} {'esc lat':>7} {'esc dif':>7} "
+          f"{'ratio':>6} {'far lat':>7} {'far dif':>7} {'ratio':>6}")
+    side_rows(32)
+    if args.sphere64:
+        side_rows(64)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,15 @@ Equations (cited as "Eq. (Dn)")
      at ``a' = a + z_b``: ``phi(r) = P sinh(s (a' - r)) / (4 pi D r sinh(s a'))``;
      the power leaving through ``r = a'`` is ``P s a' / sinh(s a')`` (``P`` when
      ``s = 0``).
+(D2') The same sphere with the point source at ``r0`` from the centre (a sphere lit
+     from one side: the dipole's source one reduced mean free path below the lit
+     pole). Expanding ``exp(-s R) / (4 pi R)`` in Legendre polynomials of the angle
+     ``gamma`` from the source's axis (modified spherical Bessel ``i_l``, ``k_l``) and
+     adding the homogeneous solution that vanishes at ``a'``, the Wronskian
+     ``i_l k_l' - i_l' k_l = -pi / (2 x^2)`` leaves the outgoing flux density
+     ``J(mu) = P / (4 pi a'^2) sum_l (2 l + 1) P_l(mu) i_l(s r0) / i_l(s a')``,
+     ``mu = cos gamma``; its integral over ``mu < 0`` is the power leaving through the
+     far hemisphere, ``(P / 2) sum_l (2 l + 1) rho_l int_{-1}^0 P_l``.
 (D3) The lattice's slab is the laterally uniform solution of the twin's transfer
      rule (``docs/conventions.md``): with every cell of a plane equal, the four
      lateral sources of a destination hold the destination's own coefficients, so
@@ -49,7 +58,7 @@ import scipy.sparse.linalg as spla
 from . import boundary, lattice
 from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
 
-__all__ = ["slab_diffusion", "sphere_diffusion", "slab_operator", "slab_lattice", "sphere_lattice"]
+__all__ = ["slab_diffusion", "sphere_diffusion", "sphere_side_diffusion", "slab_operator", "slab_lattice", "sphere_lattice"]
 
 
 def _coefficients(sigma_t, albedo, g):
@@ -77,6 +86,26 @@ def sphere_diffusion(sigma_t, albedo, g, a, zb, r=None):
     phi = (ap - r) / (4 * np.pi * D * r * ap) if s == 0.0 else np.sinh(s * (ap - r)) / (
         4 * np.pi * D * r * np.sinh(s * ap))
     return esc, phi
+
+
+def sphere_side_diffusion(sigma_t, albedo, g, a, zb, r0, lmax=160):
+    """Eq. (D2') for ``P = 1`` -> ``(escape, escape_far)``: all power leaving, and through the far hemisphere."""
+    from scipy.special import eval_legendre, spherical_in
+
+    _, _, s, _ = _coefficients(sigma_t, albedo, g)
+    ap = a + zb
+    x, w = np.polynomial.legendre.leggauss(200)
+    mu, w = 0.5 * (x - 1.0), 0.5 * w                 # nodes on [-1, 0]
+    total = far = 0.0
+    for ell in range(lmax + 1):
+        den = spherical_in(ell, s * ap)
+        if den == 0.0 or not np.isfinite(den):       # i_l underflows: the series has converged long before
+            break
+        rho = spherical_in(ell, s * r0) / den
+        if ell == 0:
+            total = rho
+        far += 0.5 * (2 * ell + 1) * rho * float(np.sum(w * eval_legendre(ell, mu)))
+    return float(total), float(far)
 
 
 def slab_operator(sigma_lpv, k1, emit, dx):
@@ -172,11 +201,14 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
             "T_render_out_R": read(pad + int(N), float(m["radiance_scale"])), "accum": acc, "pad": pad}
 
 
-def sphere_lattice(media, N, rtol=1e-9):
+def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
     """A sphere ``N`` cells across with a ``c00`` point source in its centre cell -> dict.
 
     ``media``: three ``(sigma_t, albedo, g)``, one per colour, in units of the sphere's
-    radius ``a = 1`` (``dx = 2 / N``). The grid is odd-sized so that the centre is a
+    radius ``a = 1`` (``dx = 2 / N``). ``depth_mfp``: the source sits instead in the cell
+    on the +x axis nearest ``depth_mfp / sigma_t'`` below the surface (per colour), and
+    the result also holds ``escape_far`` / ``escape_far_diff`` (Eq. (D2'), ``r0`` that
+    cell's centre; the lattice's sinks with ``x < 0``, half of those with ``x = 0``). The grid is odd-sized so that the centre is a
     cell centre, padded by the ``extrapolated`` layer and sinks; the steady state is
     :func:`sslpv_gl.steady.steady_state` with ``skip = 0``. Returns per colour
     ``escape`` (flux into the sinks over the source), ``escape_diff`` (Eq. (D2)), the
@@ -201,14 +233,28 @@ def sphere_lattice(media, N, rtol=1e-9):
     sig = np.where(keep > 0, m["sigma_lpv"], 0.0)
     spr = np.where(keep > 0, 1.0, 0.0)
     c0 = np.zeros((n, n, n, 3, 4))
-    c0[half, half, half, :, 0] = 1.0
+    shift = np.zeros(3, dtype=int)
+    if depth_mfp is not None:
+        sigma_tp = np.array([_coefficients(*med)[1] for med in media])
+        shift = np.round((a - depth_mfp / sigma_tp) / dx).astype(int)
+    for col in range(3):
+        c0[half, half, half + shift[col], col, 0] = 1.0   # [z, y, x]: along +x
     acc, info = steady_state(c0, sig, spr, m["g"], dx, skip=0, emit=emit, rtol=rtol, check_spectrum=False)
     out = []
     sel = inside & (r >= 3 * dx - 1e-9) & (r <= a - 3 * dx + 1e-9)
     for col, med in enumerate(media):
         esc_d, phi_d = sphere_diffusion(*med, a, float(zb[col]), r[sel])
         phi = m["fluence_scale"][col] * acc[..., col, 0][sel]     # Eq. (18); P = sqrt(4 pi) c00 = sqrt(4 pi)
-        out.append({"escape": float(acc[..., col, 0][emit[..., col] == 0].sum()), "escape_diff": esc_d,
-                    "ratio": phi / (np.sqrt(4 * np.pi) * phi_d), "r_cells": r[sel] / dx,
-                    "kappa": float(m["kappa"][col]), "zb": float(zb[col])})
+        sink = emit[..., col] == 0
+        row = {"escape": float(acc[..., col, 0][sink].sum()), "escape_diff": esc_d,
+               "ratio": phi / (np.sqrt(4 * np.pi) * phi_d), "r_cells": r[sel] / dx,
+               "kappa": float(m["kappa"][col]), "zb": float(zb[col])}
+        if depth_mfp is not None:
+            weight = np.where(idx < 0, 1.0, np.where(idx == 0, 0.5, 0.0))[None, None, :]   # x < 0, half of x = 0
+            row["escape"] = float(acc[..., col, 0][sink].sum())
+            row["escape_far"] = float((acc[..., col, 0] * weight)[sink].sum())
+            row["escape_diff"], row["escape_far_diff"] = sphere_side_diffusion(*med, a, float(zb[col]),
+                                                                               shift[col] * dx)
+            row["ratio"] = None                      # Eq. (D2)'s fluence is for the centred source
+        out.append(row)
     return out, info

@@ -74,6 +74,25 @@ class TestSphere:
             assert o["kappa"] == pytest.approx(float(lattice.diffusion_coefficients(*med)[2]) * 2 / 32, rel=1e-12)
 
 
+class TestSphereLitFromOneSide:
+    def test_series_reduces_to_the_centred_source(self):
+        """Eq. (D2') at r0 -> 0: Eq. (D2)'s escape, half of it through each hemisphere."""
+        esc, far = bounded.sphere_side_diffusion(*SPHERE[0], 1.0, 0.2, 1e-12)
+        assert esc == pytest.approx(bounded.sphere_diffusion(*SPHERE[0], 1.0, 0.2)[0], rel=1e-9)
+        assert far == pytest.approx(0.5 * esc, rel=1e-9)
+
+    def test_source_one_mean_free_path_below_the_pole(self):
+        """Eq. (D2') at N = 32: all escaping power and the far hemisphere's (the transmitted light), within 5 %."""
+        out, _ = bounded.sphere_lattice(SPHERE, 32, depth_mfp=1.0)
+        for med, o in zip(SPHERE, out):
+            sigma_tp = med[0] * (1 - med[1]) + med[0] * med[1] * (1 - med[2])
+            r0 = round((1.0 - 1.0 / sigma_tp) * 16) / 16
+            esc_d, far_d = bounded.sphere_side_diffusion(*med, 1.0, _zb(*med), r0)
+            print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, far {o['escape_far']:.4f} vs {far_d:.4f}")
+            assert o["escape"] == pytest.approx(esc_d, rel=TOL)
+            assert o["escape_far"] == pytest.approx(far_d, rel=TOL)
+
+
 class TestSinkRadiance:
     """A sink's accumulated light is flux that left the medium: its radiance scale is 1, not Eq. (21)'s."""
 

@@ -427,4 +427,8 @@ MUTATIONS = (
              'emit=material["emit"], empty=material.get("empty"))', 'emit=material["emit"])',
              ("tests/test_outside_interior.py::TestGL::test_render_accumulation_matches_twin",),
              "steps = steady: the host solve forgets outside = interior's empty cells"),
+    Mutation("side_series_monopole_only", "physics", "sslpv_gl/bounded.py",
+             "for ell in range(lmax + 1):", "for ell in range(1):",
+             ("tests/test_diffusion_bounded.py::TestSphereLitFromOneSide::test_source_one_mean_free_path_below_the_pole",),
+             "the one-sided sphere's series (Eq. (D2')) cut to its monopole: the far hemisphere gets half the escape"),
 )
