@@ -1,4 +1,4 @@
-"""Connections through several interfaces (issue 26): the deficit, the crossing counts, the chains' agreement.
+"""Connections through several interfaces: the deficit, the crossing counts, the chains' agreement.
 
 On a non-convex scene, at eta = 1.0001 (where the straight segment is the exact connection)
 against index-matched ``volpath``, renders ``mneevolpath`` with ``max_crossings = 1`` (one

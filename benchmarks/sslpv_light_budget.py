@@ -1,4 +1,4 @@
-"""Where SSLPV's light goes, and how the error behaves as the grid is refined (issue 9, parts 3-5).
+"""Where SSLPV's light goes, and how the error behaves as the grid is refined (parts 3-5).
 
 Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot for ``refine``):
 

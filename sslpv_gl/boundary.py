@@ -48,6 +48,20 @@ Modes
      - diffusion theory's extrapolated boundary: the fluence vanishes at
        ``z_b = 2 A(eta) D`` beyond the surface (Eq. (B3) below), with the
        Fresnel-dependent ``A(eta)`` the dipole uses
+   * - ``interior``
+     - inside cells
+     - every cell
+     - light never moves between two empty cells: an outside cell exchanges light
+       with its inside neighbours only (``empty`` mask, below), so light that leaves
+       the medium is removed unless it steps straight back into it, and cannot go
+       round the object through the empty cells
+
+The ``interior`` mode needs a third mask, ``empty`` (1 in outside cells), applied
+to each PAIR: the transfer from ``s`` to ``d`` is multiplied by
+``1 - empty[s] empty[d]``. Unlike ``absorb``, the surface cells (outside-centred
+cells that hold the surface points the shading reads) keep sending light back into
+the medium, so a front-lit object keeps its light; unlike ``vacuum``, the empty
+cells carry nothing round the object. The rule acts at every step, the first too.
 
 Equations (cited as "Eq. (Bn)")
 -------------------------------
@@ -76,11 +90,11 @@ import numpy as np
 
 from .optics import fresnel_reflectance
 
-__all__ = ["OUTSIDE_MODES", "diffuse_fresnel_reflectance", "fresnel_moment", "egan_hilgeman_fdr", "a_of_eta",
+__all__ = ["OUTSIDE_MODES", "empty_mask", "diffuse_fresnel_reflectance", "fresnel_moment", "egan_hilgeman_fdr", "a_of_eta",
            "extrapolation_distance", "outside_masks"]
 
 #: ``outside`` choices, in the order of the table above.
-OUTSIDE_MODES = ("vacuum", "material", "absorb", "extrapolated")
+OUTSIDE_MODES = ("vacuum", "material", "absorb", "extrapolated", "interior")
 
 
 def _moment_nodes(eta, order):
@@ -169,6 +183,8 @@ def outside_masks(inside_mask, mode, zb_cells=None):
         return ones, ones
     if mode == "absorb":
         return ins, ins
+    if mode == "interior":                           # the pair rule is empty_mask's
+        return ins, ones
     # extrapolated: outside cells whose centre lies within z_b of the surface keep the medium.
     from scipy.ndimage import distance_transform_edt
 
@@ -185,3 +201,16 @@ def outside_masks(inside_mask, mode, zb_cells=None):
     layer = (dist[..., None] - 0.5) <= zb
     keep = np.where(inside[..., None], True, layer).astype(np.float64)
     return keep, keep
+
+
+def empty_mask(inside_mask, mode):
+    """The ``empty`` mask of ``outside = interior`` -> float64 ``(N, N, N, 3)``, or None for the other modes.
+
+    1 in the cells whose centre lies outside the mesh; the transfer between two such
+    cells is cut (module docstring). None (no pair rule) for every other mode, and
+    when there is no mask.
+    """
+    if mode != "interior" or inside_mask is None:
+        return None
+    out = ~np.asarray(inside_mask, dtype=bool)
+    return np.repeat(out[..., None], 3, axis=-1).astype(np.float64)

@@ -39,8 +39,8 @@ Parameters of :func:`lpv_material`
      - ``"vacuum"``
      - ``"vacuum"``: cells outside the mesh get ``sigma_lpv = sigma_s' = 0``;
        ``"material"``: they keep the medium's values; ``"absorb"`` and
-       ``"extrapolated"``: sink cells (:mod:`sslpv_gl.boundary`, which
-       documents all four)
+       ``"extrapolated"``: sink cells; ``"interior"``: no light moves between
+       two outside cells (:mod:`sslpv_gl.boundary`, which documents all five)
    * - ``eta``
      - ``1.0``
      - the boundary's relative index (``extrapolated``: ``z_b = 2 A(eta) D``)
@@ -90,7 +90,10 @@ Limits
   heterogeneous medium it is applied cell by cell, which is exact where
   ``sigma_t'`` is constant (``sigma_a`` may vary) but not across jumps of
   ``D`` (docs Sec. 6). Vacuum cells (``sigma_t = 0``) get a zero
-  ``radiance_scale``.
+  ``radiance_scale``. Under ``outside = absorb``, ``extrapolated`` and ``interior``
+  the cells without the medium (sinks, empty cells) get ``radiance_scale = 1``: they
+  hold flux that left the medium, not the lattice's fluence
+  (``docs/diffusion_mapping.md`` Sec. 7).
 """
 
 from __future__ import annotations
@@ -266,7 +269,8 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     ``g`` (Eq. 3's; the lattice's for ``diffusion``), ``radiance_scale``
     (multiplies the shaded subsurface radiance read from each cell, Eq. (21)
     of ``docs/diffusion_mapping.md``; all 1 except for ``diffusion``) and
-    ``emit`` (0 in sink cells, :mod:`sslpv_gl.boundary`); arrays are indexed
+    ``emit`` (0 in sink cells, :mod:`sslpv_gl.boundary`), and for ``outside =
+    "interior"`` only, ``empty`` (1 in outside cells: no transfer between two of them); arrays are indexed
     ``[z, y, x, colour]``. ``outside`` is one of
     :data:`sslpv_gl.boundary.OUTSIDE_MODES`; ``eta`` (the boundary's index)
     sets the extrapolation distance of ``extrapolated``; ``sigma_scale``
@@ -297,6 +301,8 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
         sigma_lpv = sigma_lpv * float(sigma_scale)
     sigma_s_prime = np.clip(mapped["sigma_s_prime"], 0.0, 1.0)
     emit = np.ones_like(sigma_lpv)
+    empty = None
+    radiance_scale = mapped["radiance_scale"]
 
     if inside_mask is not None:
         mask = np.asarray(inside_mask, dtype=bool)
@@ -313,13 +319,22 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
         sigma_lpv = np.where(keep > 0, sigma_lpv, 0.0)
         sigma_s_prime = np.where(keep > 0, sigma_s_prime, 0.0)
         emit = np.broadcast_to(emit, sigma_lpv.shape)
+        empty = boundary.empty_mask(mask, outside)
+        if mapping == "diffusion" and outside in ("absorb", "extrapolated", "interior"):
+            # Eq. (21) turns the lattice's steady state U into fluence: it holds in medium cells
+            # only. A sink (or an interior mode's empty cell) accumulates the flux that LEFT the
+            # medium, which the paper's area-light estimate (Eq. 5-7, scale 1) already turns into
+            # exitant radiance (exactly Phi / (pi A) for a clamped-cosine lobe). Scaling it by R
+            # (~0.1 at sigma_t' dx ~ 0.5) was the main term of the back-lit deficit.
+            radiance_scale = np.where(keep > 0, radiance_scale, 1.0)
 
     return {
         "sigma_lpv": sigma_lpv.astype(np.float32),
         "sigma_s_prime": sigma_s_prime.astype(np.float32),
         "g": g.astype(np.float32),
-        # cells outside the mesh keep the scale of the medium there: it is a
-        # property of the material the cell's light was mapped with
-        "radiance_scale": mapped["radiance_scale"].astype(np.float32),
+        # cells outside the mesh keep the scale of the medium there under vacuum and
+        # material (a property of the material the light was mapped with); 1 in sinks
+        # and empty cells (above)
+        "radiance_scale": radiance_scale.astype(np.float32),
         "emit": emit.astype(np.float32),
-    }
+    } | ({} if empty is None else {"empty": empty.astype(np.float32)})

@@ -52,7 +52,8 @@ class SSLPVParams:
     mapping: str = _p("collision", "physical (sigma_t, albedo) -> LPV (sigma_lpv, sigma_s') mapping: literal, "
                                    "collision, diffusion, or calibrated:PATH (a file of sslpv-harness calibrate)")
     resample: str = _p("box", "medium grid -> LPV grid resampling: box average or point (trilinear)")
-    outside: str = _p("vacuum", "LPV cells outside the mesh: vacuum (no attenuation/scattering) or material")
+    outside: str = _p("vacuum", "LPV cells outside the mesh: vacuum (the paper), material, absorb, extrapolated "
+                                  "or interior (no light moves between two outside cells; sslpv_gl.boundary)")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
     skip: int = _p(2, "first propagation steps not accumulated (paper Sec. 4: 2), in [0, steps]")
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")

@@ -95,8 +95,12 @@ def upload_material(grid, material, dx):
     sigma = np.asarray(material["sigma_lpv"], dtype=np.float64).reshape(shape)
     emit = np.broadcast_to(np.asarray(material.get("emit", 1.0), dtype=np.float64), shape)
     half = np.exp(-0.5 * sigma * float(dx))
-    for tex, arr in zip(grid.material, (half, half * k1 * emit, half * emit, half * k1)):
-        tex.write(_rgba(arr))
+    # alpha of u_half and u_h0 (textures 0 and 2; 0 is also step 1's u_h0): 1 in empty cells
+    # (outside = interior: no transfer between two of them, propagate.comp); 0 otherwise
+    empty = material.get("empty")
+    alpha = None if empty is None else np.asarray(empty, dtype=np.float64).reshape(shape)[..., 0]
+    for i, (tex, arr) in enumerate(zip(grid.material, (half, half * k1 * emit, half * emit, half * k1))):
+        tex.write(_rgba(arr, alpha if i in (0, 2) else None))
     return upload_scale(grid, material)
 
 
@@ -116,9 +120,11 @@ def upload_scale(grid, material):
     return scaled
 
 
-def _rgba(rgb):
+def _rgba(rgb, alpha=None):
     a = np.zeros(rgb.shape[:3] + (4,), dtype=np.float32)
     a[..., :3] = rgb
+    if alpha is not None:
+        a[..., 3] = alpha
     return a.tobytes()
 
 

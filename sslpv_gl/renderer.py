@@ -480,7 +480,7 @@ class SSLPVRenderer:
             from .steady import steady_state
 
             acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
-                                     skip=params.skip, emit=material["emit"])
+                                     skip=params.skip, emit=material["emit"], empty=material.get("empty"))
             write_grid(grid.accum, acc, params.precision)
             ctx.finish()
             prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost

@@ -265,7 +265,7 @@ def _skip(skip):
 
 # ---------------------------------------------------------------- operator
 
-def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None):
+def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None, empty=None):
     """One propagation step (Sec. 3.2, Eq. 3, Sec. 4) as sparse matrices, one per colour.
 
     Returns a list of three ``scipy.sparse.csr_matrix`` of shape
@@ -278,6 +278,8 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)
     ``emit`` (default 1) multiplies what each SOURCE cell sends on: 0 makes a
     sink cell (:mod:`sslpv_gl.boundary`), as in :func:`sslpv_gl.twin.propagate`
     (whose first step, like :func:`steady_state`'s, uses the operator without sinks).
+    ``empty`` (default 0) marks empty cells: the entry from ``s`` to ``d`` is multiplied
+    by ``1 - empty[s] empty[d]`` (``outside = interior``, at every step).
 
     All three matrices share one sparsity pattern (36 entries per cell away
     from the boundary). It is built once, vectorised, directly in CSR order
@@ -287,6 +289,7 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)
     N = _grid_size(sigma_lpv, sigma_s_prime, g)
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
     em = _material(1.0 if emit is None else emit, 0.0, 0.0, N)[0]
+    emp = None if empty is None else _material(empty, 0.0, 0.0, N)[0]
     dxs = _dx(dx)
     mats = propagation_matrices() if matrices is None else np.asarray(matrices, dtype=np.float64)
     if mats.shape != (6, 4, 4):
@@ -310,7 +313,10 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)
         axis = int(np.flatnonzero(offset)[0])
         src_cell[cells[dst].ravel(), j] = cells[src].ravel()
         # half the path lies in each cell (conventions: mean of source and destination)
-        att[cells[dst].ravel(), j] = (np.exp(-0.5 * (sig[src] + sig[dst]) * dxs[axis]) * em[src]).reshape(-1, 3)
+        a = np.exp(-0.5 * (sig[src] + sig[dst]) * dxs[axis]) * em[src]
+        if emp is not None:                          # no link between two empty cells
+            a = a * (1.0 - emp[src] * emp[dst])
+        att[cells[dst].ravel(), j] = a.reshape(-1, 3)
         k1_src[cells[dst].ravel(), j] = k1[src].reshape(-1, 3)
     m = mats[order].transpose(1, 0, 2)                       # (a, s, b)
     keep = (np.abs(m) > drop)[None] & (src_cell >= 0)[:, None, :, None]   # (cell, a, s, b)
@@ -421,7 +427,7 @@ def _power_radius(apply, v, iterations=400):
 # ------------------------------------------------------------ steady state
 
 def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rtol=1e-8,
-                 method="bicgstab", maxiter=5000, check_spectrum=True, emit=None):
+                 method="bicgstab", maxiter=5000, check_spectrum=True, emit=None, empty=None):
     """Converged accumulation grid ``sum_{k>skip} P^k c0`` (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, info)``.
 
     The paper's accumulation grid once "the propagation grid is empty"
@@ -439,7 +445,7 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
     ``time`` (seconds: ``operator`` (build and red/black split), ``spectrum``,
     ``solve``, ``total``).
 
-    ``emit``: sink cells, as in :func:`transfer_operator`.
+    ``emit``: sink cells, ``empty``: empty cells, as in :func:`transfer_operator`.
 
     Raises ``ValueError`` (one line) on bad input, when ``rho(P) >= 1`` for a
     colour that carries light (the series diverges: no steady state), or
@@ -457,9 +463,9 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
         _bad("maxiter", f"must be an integer >= 1, got {maxiter!r}", "pass e.g. 5000")
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
 
-    ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty)
     # step 1 carries the injected light, which has crossed the surface inwards: every cell emits
-    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices)
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty)
     t_op = time.perf_counter() - t_start
     red, black = _red_black(N)
     accum = np.zeros_like(c0)
@@ -557,7 +563,7 @@ def remaining_fraction(c, c0):
 
 
 def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=4096, skip=2, matrices=None,
-                    emit=None):
+                    emit=None, empty=None):
     """Propagate until the light is gone (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, steps_used, remaining)``.
 
     ``steps = auto``: apply the one-step operator (same rule as
@@ -576,8 +582,8 @@ def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=409
     if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < skip:
         _bad("max_steps", f"must be an integer >= skip ({skip}), got {max_steps!r}", "raise max_steps")
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
-    ops = transfer_operator(sig, spr, gg, dx, matrices, emit)
-    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices)   # step 1: every cell emits
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty)
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty)   # step 1: every cell emits
 
     c = [c0[..., col, :].reshape(-1).copy() for col in range(3)]
     inj = np.abs(c0[..., 0]).sum(axis=(0, 1, 2))

@@ -121,7 +121,7 @@ def _shift_from(a, offset):
     return out
 
 
-def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None):
+def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None, empty=None):
     """Propagate and accumulate (Sec. 3.2, Eq. 3, Sec. 4) -> ``(prop, accum)``.
 
     One step, for every destination ``d`` and each of its six neighbours
@@ -142,6 +142,9 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
     0 makes a sink that keeps (and accumulates) what it received but passes
     nothing on (``outside = absorb`` / ``extrapolated``, :mod:`sslpv_gl.boundary`),
     from step 2 on: step 1 propagates the injected light from every cell.
+    ``empty`` (N,N,N,3), default 0: 1 marks an empty cell (``outside = interior``);
+    the transfer from ``s`` to ``d`` is multiplied by ``1 - empty[s] empty[d]``, so
+    no light ever moves between two empty cells (at every step, the first included).
     Returns float64 arrays of ``c0``'s shape.
     """
     c = np.asarray(c0, dtype=np.float64)
@@ -152,6 +155,7 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
     dxs = np.broadcast_to(np.asarray(dx, dtype=np.float64), (3,))
 
     em = np.broadcast_to(np.asarray(1.0 if emit is None else emit, dtype=np.float64), c.shape[:4])
+    emp = None if empty is None else np.broadcast_to(np.asarray(empty, dtype=np.float64), c.shape[:4])
 
     k1 = scatter_factors(sp, gg)[..., 1]             # Eq. 3, band 1; band 0 unchanged
     # per-direction attenuation and source material do not change between steps
@@ -159,7 +163,10 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
     for offset in SOURCE_OFFSETS:
         axis = int(np.flatnonzero(offset)[0])
         sig_s = _shift_from(sig, offset)
-        atten.append(np.exp(-0.5 * (sig_s + sig) * dxs[axis]))
+        a = np.exp(-0.5 * (sig_s + sig) * dxs[axis])
+        if emp is not None:                          # the link between two empty cells is cut
+            a = a * (1.0 - _shift_from(emp, offset) * emp)
+        atten.append(a)
     atten = np.stack(atten)                          # (6, N, N, N, 3)
 
     accum = np.zeros_like(c)

@@ -24,7 +24,7 @@ def configure(sp):
                     "family's, 0.0625,64)")
     sp.add_argument("--points", default="11", help="scanned sigma_scale values, log-spaced (default 11)")
     sp.add_argument("--skip", help="renderer setting of the fit (default: the family's)")
-    sp.add_argument("--outside", help="renderer setting of the fit: vacuum | material | absorb | extrapolated")
+    sp.add_argument("--outside", help="renderer setting of the fit: vacuum | material | absorb | extrapolated | interior")
     sp.add_argument("--no-progress", action="store_true", help="no progress on stderr")
 
 

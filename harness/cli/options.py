@@ -33,7 +33,7 @@ def add_sslpv_args(sp, multi):
     sp.add_argument("--steps", help=f"{kind}propagation steps K, or auto (to convergence) or steady (solved)")
     sp.add_argument("--mapping", help=f"{kind}parameter mapping: literal | collision | diffusion | calibrated:PATH")
     sp.add_argument("--resample", help=f"{kind}material resampling: box | point")
-    sp.add_argument("--outside", help=f"{kind}cells outside the mesh: vacuum | material | absorb | extrapolated")
+    sp.add_argument("--outside", help=f"{kind}cells outside the mesh: vacuum | material | absorb | extrapolated | interior")
     sp.add_argument("--lookup", help=f"{kind}shading lookup: cell | trilinear")
     sp.add_argument("--skip", help=f"{kind}propagation steps not accumulated (paper: 2)")
     sp.add_argument("--inject-offset", dest="inject_offset", help=f"{kind}injection offset along -n (scene units)")

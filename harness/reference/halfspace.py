@@ -28,7 +28,7 @@ and horizontal distance ``rho`` from the light's foot:
 * ``p`` is Henyey-Greenstein with the cosine between the light's direction of travel at
   ``x(s)`` and ``-d_t`` (toward the camera).
 
-**A slab above the half-space** (the chain of three interfaces, issue 26): a layer of the
+**A slab above the half-space** (the chain of three interfaces): a layer of the
 same medium between heights ``a`` and ``a + b`` (``0 < a``, ``a + b < h``) with air on both
 sides. The light's path leaves the slab's top, crosses it, leaves its bottom, crosses the
 air gap and enters the half-space, and every interface is parallel, so the angles in the

@@ -1,4 +1,4 @@
-"""What the exact reference leaves out behind a smooth dielectric: measured, recorded, and judged (issue 26).
+"""What the exact reference leaves out behind a smooth dielectric: measured, recorded, and judged.
 
 ``mneevolpath`` (:mod:`harness.reference.mnee`) connects a medium vertex to a point light
 through 1, 3, 5, ... crossings of the boundary, up to ``[boundary] max_crossings``

@@ -91,7 +91,7 @@ estimation (Hanika, Droske and Fascione, "Manifold Next Event Estimation", EGSR 
    formula the ``dielectric`` BSDF uses) and the light's intensity toward ``x1``.
 5. **Transmittance** from ``x0`` to ``x1`` by ratio tracking (analytic in a
    ``homogeneous`` medium); the segment ``x1 -> y`` must be unoccluded (``ray_test``).
-6. **Chains** (issue 26): where the straight seed segment crosses the same shape's boundary
+6. **Chains**: where the straight seed segment crosses the same shape's boundary
    k = 3, 5, ... <= ``max_crossings`` times (it leaves the object, crosses air, enters
    another part and leaves again), a second walk moves all k crossings at once on the
    block-tridiagonal constraint of Hanika et al. Sec. 4 (:mod:`harness.reference.mnee_chain`:

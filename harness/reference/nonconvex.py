@@ -1,4 +1,4 @@
-"""Non-convex validation scenes for connections through several interfaces (issue 26).
+"""Non-convex validation scenes for connections through several interfaces.
 
 :func:`torus_hole`: skin_torus_dielectric's torus, camera and side light, whose light passes
 through the near side of the ring to reach the far side (about a fifth of the connections

@@ -450,7 +450,7 @@ def run_nightly(matrix_path, store_path, out_root, night=None, scheduler=None, w
     except ValueError:
         raise InputError("--date", "date", f"{night!r} is not YYYY-MM-DD", "write e.g. 2026-11-22") from None
     out_root = Path(out_root)
-    # ---- (issue 13) every output is checked before anything is written: a user's folder as
+    # ---- every output is checked before anything is written: a user's folder as
     # --out, a folder that cannot be written, another program's or a corrupt store
     check_nightly_folder(out_root)
     Store.check(store_path)

@@ -478,7 +478,7 @@ def run_sweep(cfg, scheduler=None, workers=None, progress=True, group=True, lp_t
     try:
         with claim_sweep_folder(out):        # held until the sweep ends: a second sweep here is refused
             # References: committed or cached ones are read now; the missing ones are rendered on the
-            # sweep's cluster together with the configurations (issue 16: _dispatch, SweepReferences).
+            # sweep's cluster together with the configurations (_dispatch, SweepReferences).
             refs, missing = fetch_references(scenes, cfg.reference_target, progress)
             arrays = {s.name: load_reference(refs[s.name], (s.camera.height, s.camera.width))
                       for s in scenes if s.name in refs}
@@ -668,7 +668,7 @@ def _dispatch(client, store, run_id, groups, arrays, out, refs, cfg, summary, pr
             submit(i)
         else:                                # its reference is rendered first, on this cluster
             waiting.setdefault(groups[i][0].name, []).append(i)
-    # --- references the sweep lacks, rendered on its cluster (issue 16)
+    # --- references the sweep lacks, rendered on its cluster
     pending_refs = SweepReferences(client, list(render_refs), cfg.reference_target, ref_threads)
     crash_mid_group = os.environ.get("SSLPV_SWEEP_CRASH_MID_GROUP") == "1"
     total = sum(len(m) for _, _, m in groups)

@@ -8,6 +8,9 @@
 // and h_d multiplies the whole sum once. A sink cell (emit = 0: outside = absorb or
 // extrapolated, sslpv_gl.boundary) keeps what it receives but sends nothing on, so the
 // SOURCE factors carry emit (u_h0 = h emit, u_hk1 = h k1 emit) and the destination's h does not.
+// outside = interior (issue 28): the alpha of u_h0 and u_half is 1 in empty cells, and the
+// transfer between two empty cells is cut, link = 1 - e_s e_d (twin.propagate's `empty`).
+// Every other mode has alpha 0, so link = 1 exactly and the step is bit-identical.
 // The dispatch covers the cells u_lo..u_hi (inclusive), the source grid's non-zero support
 // dilated by one cell per step (sslpv_gl.propagate.region): light moves at most one cell per
 // step, so every cell beyond holds exactly 0, as the host cleared it (issue 14).
@@ -21,9 +24,9 @@ layout(local_size_x = LOCAL, local_size_y = LOCAL, local_size_z = LOCAL) in;
 uniform sampler3D u_src_r;      // propagation grid, previous step
 uniform sampler3D u_src_g;
 uniform sampler3D u_src_b;
-uniform sampler3D u_half;       // h = exp(-1/2 sigma_lpv dx) per cell, rgb: half a cell of absorption (destination)
+uniform sampler3D u_half;       // h = exp(-1/2 sigma_lpv dx) per cell, rgb: half a cell of absorption (destination); a: empty
 uniform sampler3D u_hk1;        // h * k1 * emit, k1 = (1 - sp) + sp g (Eq. 3 band-1 factor), rgb (source)
-uniform sampler3D u_h0;         // h * emit, rgb (source, band 0)
+uniform sampler3D u_h0;         // h * emit, rgb (source, band 0); a: empty
 uniform mat4  u_M[6];           // propagation matrices, sources at +x,-x,+y,-y,+z,-z
 uniform int   u_N;
 uniform ivec3 u_lo;             // first cell of this step's region (x, y, z)
@@ -45,14 +48,16 @@ layout(FORMAT, binding = 5) uniform image3D u_acc_b;
 // sixteen: the mat4 products were about 16 % of a step on llvmpipe, and this form about 10 %
 // faster in all (issue 14). The result equals M_s * c up to float rounding: the skipped
 // entries are 0 by symmetry (|entry| < 1e-12 max|M| in float64, the quadrature's noise).
-void gather(ivec3 d, ivec3 off, int s, int a, int t1, int t2,
+void gather(ivec3 d, ivec3 off, int s, int a, int t1, int t2, float e_d,
             inout vec4 out_r, inout vec4 out_g, inout vec4 out_b)
 {
     ivec3 src = d + off;
     if (any(lessThan(src, ivec3(0))) || any(greaterThanEqual(src, ivec3(u_N))))
         return;                                    // outside the grid: nothing
-    vec3 h = texelFetch(u_h0, src, 0).rgb;         // source half of the absorption (times emit)
-    vec3 hk = texelFetch(u_hk1, src, 0).rgb;       // ... times Eq. 3 of the SOURCE cell
+    vec4 h4 = texelFetch(u_h0, src, 0);
+    float link = 1.0 - h4.a * e_d;                 // 0 between two empty cells, else exactly 1
+    vec3 h = h4.rgb * link;                        // source half of the absorption (times emit)
+    vec3 hk = texelFetch(u_hk1, src, 0).rgb * link;  // ... times Eq. 3 of the SOURCE cell
     vec4 cr = texelFetch(u_src_r, src, 0);
     vec4 cg = texelFetch(u_src_g, src, 0);
     vec4 cb = texelFetch(u_src_b, src, 0);
@@ -79,13 +84,14 @@ void main()
     vec4 out_r = vec4(0.0);                        // gathered coefficients per colour
     vec4 out_g = vec4(0.0);
     vec4 out_b = vec4(0.0);
+    float e_d = texelFetch(u_half, d, 0).a;        // 1: the destination is an empty cell
     // coefficient order (c00, c1-1, c10, c11) ~ (1, y, z, x): the x axis is index 3, y 1, z 2
-    gather(d, ivec3(1, 0, 0), 0, 3, 1, 2, out_r, out_g, out_b);
-    gather(d, ivec3(-1, 0, 0), 1, 3, 1, 2, out_r, out_g, out_b);
-    gather(d, ivec3(0, 1, 0), 2, 1, 2, 3, out_r, out_g, out_b);
-    gather(d, ivec3(0, -1, 0), 3, 1, 2, 3, out_r, out_g, out_b);
-    gather(d, ivec3(0, 0, 1), 4, 2, 1, 3, out_r, out_g, out_b);
-    gather(d, ivec3(0, 0, -1), 5, 2, 1, 3, out_r, out_g, out_b);
+    gather(d, ivec3(1, 0, 0), 0, 3, 1, 2, e_d, out_r, out_g, out_b);
+    gather(d, ivec3(-1, 0, 0), 1, 3, 1, 2, e_d, out_r, out_g, out_b);
+    gather(d, ivec3(0, 1, 0), 2, 1, 2, 3, e_d, out_r, out_g, out_b);
+    gather(d, ivec3(0, -1, 0), 3, 1, 2, 3, e_d, out_r, out_g, out_b);
+    gather(d, ivec3(0, 0, 1), 4, 2, 1, 3, e_d, out_r, out_g, out_b);
+    gather(d, ivec3(0, 0, -1), 5, 2, 1, 3, e_d, out_r, out_g, out_b);
     vec3 h_d = texelFetch(u_half, d, 0).rgb;       // destination half of the absorption
     out_r *= h_d.r;
     out_g *= h_d.g;

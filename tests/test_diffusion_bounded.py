@@ -1,0 +1,126 @@
+"""The ``diffusion`` mapping in bounded objects against diffusion theory (issue 28, Sec. 1).
+
+The lattice runs with the ``extrapolated`` outside mode; the reference is the diffusion
+equation with ``phi = 0`` at the extrapolated surface ``z_b = 2 D`` (index-matched),
+solved in closed form (:mod:`sslpv_gl.bounded`, Eq. (D1), (D2)). ``z_b`` is computed
+here from ``D = 1 / (3 sigma_t')`` directly, not through :mod:`sslpv_gl.boundary`,
+so the reference is independent of the code that builds the lattice's layer.
+Tolerance 5 % (the issue's target), at N = 32 and 64, for the issue's back-lit
+medium (4.5 reduced mean free paths across, albedo 0.99, g = 0.3). Media whose
+``z_b`` is under ~1.5 cells miss it (``benchmarks/diffusion_bounded.py``).
+"""
+
+import numpy as np
+import pytest
+
+from sslpv_gl import bounded, lattice, twin
+from sslpv_gl.material import lpv_material
+from sslpv_gl.sh import clamped_cosine_coeffs, hemisphere_radiance
+
+TOL = 0.05
+#: the back-lit medium in units of the slab's thickness / the sphere's radius
+SLAB = (4.5 / 0.703, 0.99, 0.3)
+SPHERE = [(2.25 / 0.703, 0.99, 0.3), (7.5 / 0.703, 0.99, 0.3), (4.5 / 0.703, 0.99, 0.3)]
+
+
+def _zb(sigma_t, albedo, g):
+    sigma_tp = sigma_t * (1 - albedo) + sigma_t * albedo * (1 - g)
+    return 2.0 / (3.0 * sigma_tp)
+
+
+class TestSlabOperator:
+    def test_equals_twin_for_a_laterally_uniform_field(self):
+        """Eq. (D3): the chain's steps equal the twin's centre column while the lateral edges are out of reach."""
+        rng = np.random.default_rng(3)
+        n, lat, steps = 10, 9, 3
+        sig = rng.uniform(0.0, 2.0, n)
+        k1 = rng.uniform(-1.0, 1.0, n)
+        emit = (rng.uniform(size=n) > 0.3).astype(float)
+        c0 = rng.normal(size=(n, 4))
+        dx = 0.3
+        # twin: k1 = (1 - sp) + sp g with sp = 1, g = k1
+        shape = (lat, lat, n, 3)
+        grid = np.broadcast_to(c0[None, None, :, None, :], shape + (4,)).copy()
+        prop, _ = twin.propagate(grid, np.broadcast_to(sig[:, None], shape), 1.0, np.broadcast_to(k1[:, None], shape),
+                                 dx, steps,
+                                 skip=0, emit=np.broadcast_to(emit[:, None], shape))
+        P = bounded.slab_operator(sig, k1, emit, dx)
+        c = bounded.slab_operator(sig, k1, np.ones(n), dx) @ c0.ravel()   # step 1 ignores emit
+        for _ in range(steps - 1):
+            c = P @ c
+        np.testing.assert_allclose(prop[lat // 2, lat // 2, :, 0], c.reshape(n, 4), rtol=1e-12, atol=1e-14)
+
+
+class TestSlab:
+    @pytest.mark.parametrize("N", [32, 64])
+    def test_reflectance_and_transmittance(self, N):
+        """Eq. (D1): R and T of a plane source one reduced mean free path deep, within 5 %."""
+        r = bounded.slab_lattice(*SLAB, N)
+        R_d, T_d = bounded.slab_diffusion(*SLAB, 1.0, r["z0"], _zb(*SLAB))
+        print(f"N={N}: R {r['R']:.4f} vs {R_d:.4f}, T {r['T']:.4f} vs {T_d:.4f}")
+        assert r["R"] == pytest.approx(R_d, rel=TOL)
+        assert r["T"] == pytest.approx(T_d, rel=TOL)
+
+
+class TestSphere:
+    def test_point_source_at_the_centre(self):
+        """Eq. (D2) at N = 32: escaping power and the fluence at 3 <= r/dx <= a/dx - 3, within 5 %."""
+        out, _ = bounded.sphere_lattice(SPHERE, 32)
+        for med, o in zip(SPHERE, out):
+            esc_d, _ = bounded.sphere_diffusion(*med, 1.0, _zb(*med))
+            print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, phi ratio {o['ratio'].min():.3f}..{o['ratio'].max():.3f}")
+            assert o["escape"] == pytest.approx(esc_d, rel=TOL)
+            assert np.all(np.abs(o["ratio"] - 1.0) < TOL)
+            assert o["kappa"] == pytest.approx(float(lattice.diffusion_coefficients(*med)[2]) * 2 / 32, rel=1e-12)
+
+
+class TestSphereLitFromOneSide:
+    def test_series_reduces_to_the_centred_source(self):
+        """Eq. (D2') at r0 -> 0: Eq. (D2)'s escape, half of it through each hemisphere."""
+        esc, far = bounded.sphere_side_diffusion(*SPHERE[0], 1.0, 0.2, 1e-12)
+        assert esc == pytest.approx(bounded.sphere_diffusion(*SPHERE[0], 1.0, 0.2)[0], rel=1e-9)
+        assert far == pytest.approx(0.5 * esc, rel=1e-9)
+
+    def test_source_one_mean_free_path_below_the_pole(self):
+        """Eq. (D2') at N = 32: all escaping power and the far hemisphere's (the transmitted light), within 5 %."""
+        out, _ = bounded.sphere_lattice(SPHERE, 32, depth_mfp=1.0)
+        for med, o in zip(SPHERE, out):
+            sigma_tp = med[0] * (1 - med[1]) + med[0] * med[1] * (1 - med[2])
+            r0 = round((1.0 - 1.0 / sigma_tp) * 16) / 16
+            esc_d, far_d = bounded.sphere_side_diffusion(*med, 1.0, _zb(*med), r0)
+            print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, far {o['escape_far']:.4f} vs {far_d:.4f}")
+            assert o["escape"] == pytest.approx(esc_d, rel=TOL)
+            assert o["escape_far"] == pytest.approx(far_d, rel=TOL)
+
+
+class TestSinkRadiance:
+    """A sink's accumulated light is flux that left the medium: its radiance scale is 1, not Eq. (21)'s."""
+
+    def test_paper_estimate_of_an_outgoing_cosine_flux_is_lambertian(self):
+        """Eq. 5-7 on a clamped-cosine lobe of flux Phi: L = Phi / (pi A), exactly (why the scale is 1)."""
+        n, phi, area = np.array([0.3, -0.4, 0.866]), 2.5, 0.01
+        n = n / np.linalg.norm(n)
+        c = clamped_cosine_coeffs(n) * phi / np.pi   # Eq. 1's lobe carrying flux phi
+        assert hemisphere_radiance(c, n, area) == pytest.approx(phi / (np.pi * area), rel=1e-12)
+
+    @pytest.mark.parametrize("outside", ["absorb", "interior", "extrapolated", "vacuum"])
+    def test_scale_per_cell(self, outside):
+        from types import SimpleNamespace
+
+        N = 12
+        c = (np.arange(N) + 0.5) / N - 0.5
+        z, y, x = np.meshgrid(c, c, c, indexing="ij")
+        inside = x**2 + y**2 + z**2 < 0.4**2
+        med = SimpleNamespace(bbox_min=[0, 0, 0], bbox_max=[1, 1, 1],
+                              sigma_t=np.full((4, 4, 4, 3), 30.0, np.float32),
+                              albedo=np.full((4, 4, 4, 3), 0.95, np.float32), g=np.zeros((4, 4, 4, 3), np.float32))
+        m = lpv_material(med, inside, N, "diffusion", outside=outside)
+        R = float(lattice.diffusion_mapping(30.0, 0.95, 0.0, 1.0 / N)["radiance_scale"])
+        rs = m["radiance_scale"][..., 0]
+        np.testing.assert_allclose(rs[inside], R, rtol=1e-6)
+        medium = m["sigma_lpv"][..., 0] > 0
+        if outside == "vacuum":                      # outside cells keep the medium's scale
+            np.testing.assert_allclose(rs[~inside], R, rtol=1e-6)
+        else:                                        # 1 where the medium is not kept (sinks, empty cells)
+            np.testing.assert_array_equal(rs[~medium], 1.0)
+            assert (~medium).any()
