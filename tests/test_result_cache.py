@@ -61,6 +61,16 @@ def _edit(root, rel, old, new):
     return lambda: p.write_text(text)
 
 
+def _before_after(root, rel, old, new, fingerprint):
+    """``fingerprint(root)`` before and after one edit of ``rel`` (undone afterwards)."""
+    before = fingerprint(root)
+    restore = _edit(root, rel, old, new)
+    try:
+        return before, fingerprint(root)
+    finally:
+        restore()
+
+
 @pytest.mark.parametrize("rel, old, new, changed", [
     # a constant in SSLPV's shading shader: SSLPV only (the rivals never load shade.frag)
     ("sslpv_gl/shaders/shade.frag", "out_sub  = vec4(sub, 1.0);", "out_sub  = vec4(sub * 1.01, 1.0);", {"sslpv"}),
@@ -77,12 +87,7 @@ def _edit(root, rel, old, new):
     ("harness/report/build.py", "import json\n", "import json\nimport os as _os  # noqa\n", set()),
 ])
 def test_an_edit_rekeys_exactly_the_methods_that_use_it(tree, rel, old, new, changed):
-    before = _fingerprints(tree)
-    restore = _edit(tree, rel, old, new)
-    try:
-        after = _fingerprints(tree)
-    finally:
-        restore()
+    before, after = _before_after(tree, rel, old, new, _fingerprints)
     assert {m for m in before if before[m] != after[m]} == changed
 
 
@@ -99,12 +104,7 @@ def _metrics_fingerprint(root):
     ("sslpv_gl/shaders/shade.frag", "out_sub  = vec4(sub, 1.0);", "out_sub  = vec4(sub * 1.01, 1.0);", False),
 ])
 def test_the_metric_code_hash_follows_the_metric_code_only(tree, rel, old, new, changed):
-    before = _metrics_fingerprint(tree)
-    restore = _edit(tree, rel, old, new)
-    try:
-        after = _metrics_fingerprint(tree)
-    finally:
-        restore()
+    before, after = _before_after(tree, rel, old, new, _metrics_fingerprint)
     assert (before != after) == changed
 
 

@@ -126,13 +126,8 @@ def refine_k(rows, scenes, families, metric, budget, folder):
         ax.set_yscale("log")
         ax.set_title(scene, fontsize=8)
         ax.tick_params(labelsize=6)
-    axes[0].set_ylabel(f"{_axis_name(metric)} (subsurface)", fontsize=7)
-    axes[-1].set_xlabel(f"propagation steps K (N = {budget['grid']})", fontsize=7)
-    h, lab = axes[0].get_legend_handles_labels()
-    fig.legend(h, lab, fontsize=7, loc="upper right")
-    fig.suptitle("Error against the propagation steps", fontsize=9)
-    fig.tight_layout(rect=(0, 0, 0.86, 0.96))
-    return _save(fig, folder, "refine_k")
+    return _finish_refinement(fig, axes, metric, f"propagation steps K (N = {budget['grid']})",
+                              "Error against the propagation steps", folder, "refine_k")
 
 
 def refine_n(rows, scenes, families, metric, budget, folder):
@@ -163,13 +158,19 @@ def refine_n(rows, scenes, families, metric, budget, folder):
         ax.set_yscale("log")
         ax.set_title(scene, fontsize=8)
         ax.tick_params(labelsize=6)
+    return _finish_refinement(fig, axes, metric, f"grid resolution N (K = {k})",
+                              "Error against the grid resolution", folder, "refine_n")
+
+
+def _finish_refinement(fig, axes, metric, xlabel, title, folder, name):
+    """Labels, one legend and the title of a refinement figure (one panel per scene); saves it."""
     axes[0].set_ylabel(f"{_axis_name(metric)} (subsurface)", fontsize=7)
-    axes[-1].set_xlabel(f"grid resolution N (K = {k})", fontsize=7)
+    axes[-1].set_xlabel(xlabel, fontsize=7)
     h, lab = axes[0].get_legend_handles_labels()
     fig.legend(h, lab, fontsize=7, loc="upper right")
-    fig.suptitle("Error against the grid resolution", fontsize=9)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout(rect=(0, 0, 0.86, 0.96))
-    return _save(fig, folder, "refine_n")
+    return _save(fig, folder, name)
 
 
 def _tonemap(rgb, scale):
