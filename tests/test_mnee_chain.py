@@ -28,21 +28,14 @@ import pytest
 
 from harness.scene import Boundary
 
+from .test_mnee import render_stack, z_statistics
+
 ms = pytest.importorskip("harness.reference.mitsuba_scene")
 
 
 @pytest.fixture(scope="module")
 def mi():
     return ms.use_variant("llvm_ad_rgb")
-
-
-def render_stack(mi, scene_dict, seeds, spp):
-    scene = mi.load_dict(scene_dict)
-    return np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
-
-
-def z_statistics(z):
-    return float(np.mean(np.all(np.abs(z) <= 4, axis=-1))), float(np.abs(z).max()), float(np.mean(z ** 2))
 
 
 # --------------------------------------------------------------------------- chain math

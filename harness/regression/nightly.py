@@ -324,6 +324,7 @@ def _trend_styles(lines):
 
     grids = sorted({line[1] for line in lines if line[1]})
     steps = sorted({line[2] for line in lines if line[1]}, key=steps_key)
+    rivals = sorted({line[2] for line in lines if not line[1]})
     styles = ["-", "--", ":", "-."]
     out = {}
     for line in lines:
@@ -332,8 +333,7 @@ def _trend_styles(lines):
             colour = matplotlib.colormaps["viridis"](grids.index(n) / max(len(grids) - 1, 1))
             out[_line_label(line)] = (tuple(float(c) for c in colour), styles[steps.index(k) % len(styles)])
         else:
-            out[_line_label(line)] = ((0.0, 0.0, 0.0, 1.0), styles[sorted({x[2] for x in lines if not x[1]})
-                                                                     .index(k) % len(styles)])
+            out[_line_label(line)] = ((0.0, 0.0, 0.0, 1.0), styles[rivals.index(k) % len(styles)])
     return out
 
 
