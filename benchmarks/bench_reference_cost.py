@@ -76,9 +76,10 @@ def ref_entry(meta, summ, cores_model, today=None):
     threads = (meta.get("drjit_threads") or [cores_model])[0]
     scale = threads / cores_model if meta.get("executor", "serial") != "serial" else 1.0
     n_rounds = len(meta["rounds"])
-    times = [dict(row, seconds=pilot["seconds"], jobs=pilot["K"] * passes, renders=passes, samples=pilot_spp * P * passes,
+    pilot_jobs = pilot["K"] * (2 if "early" in pilot else 1)    # a two-round pilot renders two jobs per seed
+    times = [dict(row, seconds=pilot["seconds"], jobs=pilot_jobs * passes, renders=passes, samples=pilot_spp * P * passes,
                   weight=0.5),
-             dict(row, seconds=meta["render_seconds"] * scale, jobs=(pilot["K"] + meta["K"] * n_rounds) * passes,
+             dict(row, seconds=meta["render_seconds"] * scale, jobs=(pilot_jobs + meta["K"] * n_rounds) * passes,
                   renders=passes,
                   samples=(pilot_spp + meta["spp_total"]) * P * passes, weight=0.5)]
     noise = dict(row, v=meta["median_rel_se_subsurface"] ** 2 * meta["spp_total"], weight=1.0)

@@ -85,7 +85,7 @@ def test_two_nights_verdicts_and_index(tmp_path, capsys):
     assert "regression" in page and "improvement" in page and reg["config"] in page and "SE" in page
     assert str(gone) in page
     assert (out / "2026-11-21" / "report" / "index.html").is_file()
-    assert list((out / "2026-11-21").glob("trend_*_relmse.png"))
+    assert list((out / "2026-11-21").glob("trend_*_relmse.svg"))
     index = (out / "index.html").read_text()
     assert index.index("2026-11-21") < index.index("2026-11-20")
 
@@ -163,7 +163,7 @@ def test_judge_night_notes_renderer_scene_and_missing_renders(tmp_path):
 def test_trend_series_mixes_step_modes_and_keeps_settings_apart(tmp_path):
     """Step counts and modes ('steady') in one matrix, and one mapping at two skips: every configuration
     is its own line, and the plots are drawn (sorting int with str steps failed once, after the night)."""
-    from harness.regression.nightly import trend_plots, trend_series
+    from harness.regression.trends import trend_plots, trend_series
 
     class Store:
         def configs(self, run_id):
@@ -179,5 +179,49 @@ def test_trend_series_mixes_step_modes_and_keeps_settings_apart(tmp_path):
         ("diffusion", 32, "steady", ""), ("diffusion", 32, "steady", "skip=0")]
     assert lines[("diffusion", 32, 8, "skip=0")] == [("2026-11-20", 0.1), ("2026-11-21", 0.2)]
     out = trend_plots(Store(), nights, tmp_path)
-    assert [o["file"] for o in out] == ["trend_thin_ring_relmse.png"] and (tmp_path / out[0]["file"]).is_file()
-    assert (tmp_path / "trend_legend.png").is_file()        # one legend for every figure of the night
+    assert [o["file"] for o in out] == ["trend_thin_ring_relmse.svg"] and (tmp_path / out[0]["file"]).is_file()
+    assert (tmp_path / "trend_legend.svg").is_file()        # one legend for every figure of the night
+
+
+def test_trend_figure_points_map_back_to_the_nights_values(tmp_path):
+    """Each point of a trend figure, read back through the axis its decade labels state, is the badness of
+    that configuration on that night (energy ratio: |x - 1|), and every line is on its mapping's panel."""
+    import xml.etree.ElementTree as ET
+
+    from harness.regression.trends import trend_plots
+
+    values = {1: (0.3, 1.07), 2: (0.02, 0.98), 3: (0.0045, 1.0003)}       # night -> (relmse, energy ratio)
+
+    class Store:
+        def configs(self, run_id):
+            rel, er = values[run_id]
+            return [{"status": "ok", "scene": "thin_ring", "method": "sslpv",
+                     "params": {"N": n, "steps": 8, "mapping": mapping},
+                     "metrics": {"subsurface": {"relmse": {"value": rel * n / 16},
+                                                "energy_ratio": {"value": 1 + (er - 1) * n / 16}}}}
+                    for n in (16, 32) for mapping in ("collision", "diffusion")]
+
+    nights = [(1, "2026-11-20"), (2, "2026-11-21"), (3, "2026-11-22")]
+    out = trend_plots(Store(), nights, tmp_path)
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    for fig in out:
+        root = ET.parse(tmp_path / fig["file"]).getroot()
+        ticks = {int(t.get("data-log10")): float(t.get("y")) - 3 for t in root.iter("{http://www.w3.org/2000/svg}text")
+                 if t.get("class") == "ytick"}
+        lo, hi = min(ticks), max(ticks)
+        for panel in root.findall("s:g[@class='panel']", ns):
+            # The panel's frame spans the labelled decades: its top is 10^hi, its bottom 10^lo.
+            rect = panel.find("s:rect", ns)
+            top, bottom = float(rect.get("y")), float(rect.get("y")) + float(rect.get("height"))
+            per_decade = (bottom - top) / (hi - lo)
+            assert all(abs(ticks[d] - (top + (hi - d) * per_decade)) < 0.01 for d in ticks)
+            for g in panel.findall("s:g[@class='line']", ns):
+                n = int(g.get("data-line").split()[0][1:])
+                pts = [tuple(map(float, p.split(","))) for p in g.find("s:polyline", ns).get("points").split()]
+                got = [10 ** (hi - (yv - top) / per_decade) for _, yv in pts]
+                k = 0 if fig["metric"] == "relmse" else 1
+                want = [values[r][0] * n / 16 if k == 0 else abs(values[r][1] - 1) * n / 16 for r in (1, 2, 3)]
+                assert len(got) == 3 and all(abs(a / b - 1) < 1e-3 for a, b in zip(got, want)), (fig, got, want)
+                assert [round(x, 2) for x, _ in pts] == sorted(round(x, 2) for x, _ in pts)   # oldest night left
+            assert {g.get("data-line") for g in panel.findall("s:g[@class='line']", ns)} == {"N16 K8", "N32 K8"}
+    assert {f["metric"] for f in out} >= {"relmse", "energy_ratio"}

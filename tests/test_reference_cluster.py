@@ -208,9 +208,16 @@ def test_progress_lines_show_prediction_noise_and_eta(mi, tmp_path, monkeypatch,
     from harness.reference.render import render_reference
 
     monkeypatch.setenv("SSLPV_PROGRESS", "lines")
-    render_reference(_tiny(size=12), tmp_path / "r", target_rel_se=0.2, K=2, progress=True)
+    meta = render_reference(_tiny(size=12), tmp_path / "r", target_rel_se=0.2, K=2, progress=True)
     err = capsys.readouterr().err
     assert "reference sphere_homogeneous: pilot measured" in err and "predicted 2 seeds x" in err
+    # The cost model speaks before anything renders; the pilot's first round corrects it, in the log and
+    # in reference.json, before the pilot's second round.
+    model_at, early_at, full_at = (err.index(s) for s in ("the cost model predicts", "pilot, first round (4 of 16",
+                                                          ": pilot measured"))
+    assert model_at < early_at < full_at
+    early = meta["pilot"]["early"]
+    assert early["spp"] == 4 and early["first_spp_per_seed"] >= 1 and 0 < early["elapsed_seconds"]
     # The cost model's prediction, made before rendering, is set beside the pilot's, which replaces it.
     assert "the cost model predicted" in err and "the pilot's prediction replaces it (x" in err
     assert "in this process" in err and "median rel. SE" in err and "ETA" in err

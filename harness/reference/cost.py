@@ -1,6 +1,6 @@
 """A cost model of the ground truth: what a reference costs, structured by what costs time.
 
-The reference renderer (:mod:`harness.reference.render`) runs a pilot (4 seeds x 16 spp),
+The reference renderer (:mod:`harness.reference.render`) runs a pilot (4 seeds x 16 spp, in two rounds),
 then rounds of ``K = 8`` seeds until the median relative standard error meets the target.
 Each seed of each colour pass is one job (one ``mi.render`` call). So its time on the
 model's machine is
@@ -66,7 +66,7 @@ from harness.errors import InputError
 
 MODEL_FILE = Path(__file__).with_name("cost_model.json")
 RR_TAIL = 20.0            # mean extra events under Mitsuba's roulette, survival capped at 0.95: 1 / (1 - 0.95)
-PILOT_JOBS, PILOT_SPP = 4, 16
+PILOT_JOBS, PILOT_SPP, PILOT_ROUNDS = 4, 16, 2   # render.py's pilot: seeds, spp per seed, rounds
 TIME_TERMS = ("1", "log tau", "log L", "mneevolpath", "family")
 NOISE_TERMS = ("1", "log tau", "log 1/(1-albedo)", "log 1/(1-|g|)", "cv", "smooth dielectric", "absorber pass",
                "family")
@@ -232,7 +232,8 @@ def predict_run(model, row, target, K=8, rounds=2, speed=1.0):
     spp_s = row["covered"] * row["passes"] * t_pass(model["time"]["coef"], row) / speed
     c_job, c_render = float(model["time"]["c_job"]) / speed, float(model["time"]["c_render"]) / speed
     final = K * per_seed * spp_s + c_job * K * rounds * row["passes"]
-    pilot = PILOT_JOBS * PILOT_SPP * spp_s + c_job * PILOT_JOBS * row["passes"] + c_render * row["passes"]
+    pilot = (PILOT_JOBS * PILOT_SPP * spp_s + c_job * PILOT_JOBS * PILOT_ROUNDS * row["passes"]
+             + c_render * row["passes"])
     return K * per_seed, spp_s, final, final + pilot
 
 

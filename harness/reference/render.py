@@ -19,7 +19,9 @@ says so (:func:`.mitsuba_scene.absorber_is_black`). The integrator is chosen by
 :func:`.mitsuba_scene.integrator_dict` (``mneevolpath`` behind a smooth dielectric).
 
 Choosing the sample count: unless ``spp`` is given, a pilot (4 seeds at
-``PILOT_SPP``) measures the median relative standard error ``r_p`` of the
+``PILOT_SPP``, rendered in two rounds: after the first, ``PILOT_EARLY_SPP`` samples per
+seed, the log already gives a prediction beside the cost model's, so that a scene the
+model mispredicts is corrected early) measures the median relative standard error ``r_p`` of the
 subsurface image over lit pixels at ``N_p`` samples per pixel, and the total is
 ``N = N_p (r_p / target)^2`` (SE ~ 1/sqrt(N); the low bias of a median of SEs
 estimated from few seeds is corrected, :func:`se_median_factor`), split over
@@ -86,6 +88,7 @@ from . import mitsuba_scene as ms
 DEFAULT_K = 8
 PILOT_K = 4
 PILOT_SPP = 16
+PILOT_EARLY_SPP = 4          # the pilot's first round: its prediction corrects the cost model's early
 STEPS = 4                    # the final render is rendered (and its noise measured) in at most this many steps,
 STEP_MIN_SPP = 32            # ... one per this many samples per seed (sample counts only: see the docstring)
 MAX_TOPUPS = 3
@@ -515,19 +518,28 @@ class ReferencePlan:
         if want is None:
             pilot = _Estimate(self.passes, [self.seed_base + SEED_STRIDE + i for i in range(PILOT_K)])
             self.pilot_est = pilot
-            self.progress.log(f"pilot: {PILOT_K} seeds x {PILOT_SPP} spp ({len(self.passes)} pass"
+            model = self._cost_model_seconds()
+            self.progress.log((f"the cost model predicts {format_duration(model)} for the final render, before "
+                               "rendering" if model else "the cost model cannot predict this scene") +
+                              "; the pilot corrects it after its first round")
+            self.progress.log(f"pilot: {PILOT_K} seeds x {PILOT_SPP} spp in two rounds ({PILOT_EARLY_SPP}, then "
+                              f"{PILOT_SPP - PILOT_EARLY_SPP}; {len(self.passes)} pass"
                               f"{'es' if len(self.passes) > 1 else ''}, {self.executor})")
-            yield pilot, pilot.jobs(PILOT_SPP, self.chunk_spp)
+            self.pilot = {"K": PILOT_K, "spp": PILOT_SPP, "cost_model_seconds": model}
+            yield pilot, pilot.jobs(PILOT_EARLY_SPP, self.chunk_spp)
             self._measure_cost()
-            r_p = self._noise(pilot)
-            if np.isfinite(r_p) and r_p > 0:
-                want, capped = self._spp_for(r_p, PILOT_K * PILOT_SPP, PILOT_K)
-            else:
-                want = PILOT_SPP
-            self.pilot = {"K": PILOT_K, "spp": PILOT_SPP, "median_rel_se_subsurface": r_p,
-                          "seconds": self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
-                          "predicted_wall_seconds": self._round_wall(want),
-                          "cost_model_seconds": self._cost_model_seconds()}
+            r_e, want_e, capped_e = self._pilot_predict(pilot, PILOT_EARLY_SPP)
+            seconds = self._round_spp.get("seconds", 0.0)
+            self.pilot["early"] = {"spp": PILOT_EARLY_SPP, "median_rel_se_subsurface": r_e,
+                                   "first_spp_per_seed": want_e, "predicted_wall_seconds": self._round_wall(want_e),
+                                   "elapsed_seconds": time.perf_counter() - self.t_start}
+            self.progress.log(self._prediction_line(r_e, want_e, capped_e, early=True))
+            yield pilot, pilot.jobs(PILOT_SPP - PILOT_EARLY_SPP, self.chunk_spp)
+            self._measure_cost()
+            r_p, want, capped = self._pilot_predict(pilot, PILOT_SPP)
+            self.pilot.update({"median_rel_se_subsurface": r_p,
+                               "seconds": seconds + self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
+                               "predicted_wall_seconds": self._round_wall(want)})
             self.progress.log(self._prediction_line(r_p, want, capped))
         n_steps = self.steps or (1 if self.spp_fixed is not None else min(STEPS, max(1, want // STEP_MIN_SPP)))
         step_size = max(1, math.ceil(want / n_steps))
@@ -588,11 +600,20 @@ class ReferencePlan:
             return None
         return float(est["predicted_spp_total"] * est["seconds_per_spp"])
 
-    def _prediction_line(self, r_p, want, capped):
+    def _pilot_predict(self, pilot, spp):
+        """``(noise, spp per final seed, cap)`` predicted from the pilot's ``spp`` samples per seed so far."""
+        r = self._noise(pilot)
+        if np.isfinite(r) and r > 0:
+            return (r, *self._spp_for(r, PILOT_K * spp, PILOT_K))
+        return r, PILOT_SPP, None
+
+    def _prediction_line(self, r_p, want, capped, early=False):
         where = ("in this process" if self.executor == "serial" else
                  f"on {self.executor} ({self.slots} job{'s' if self.slots > 1 else ''} at a time)")
         wall = self._round_wall(want)
-        line = (f"pilot measured {r_p:.2%} median relative SE; predicted {self.K} seeds x {want} spp "
+        head = (f"pilot, first round ({PILOT_EARLY_SPP} of {PILOT_SPP} spp per seed, "
+                f"{format_duration(time.perf_counter() - self.t_start)} after the start)" if early else "pilot")
+        line = (f"{head} measured {r_p:.2%} median relative SE; predicted {self.K} seeds x {want} spp "
                 f"({self.K * want} in all) to reach {self.target:.2%}, about {format_duration(wall)} {where}")
         model = (self.pilot or {}).get("cost_model_seconds")
         if model:

@@ -26,7 +26,7 @@ matrix's products of those methods.
 """
 
 import json
-import os
+import time
 from collections import Counter
 from datetime import date as _date
 from pathlib import Path
@@ -43,6 +43,7 @@ from harness.methods import config_label as method_label, get_method
 from harness.runs.params import any_product_model, check_methods, check_products, config_label, \
     param_lists_model, product_dict
 from harness.scene import list_scenes, load_scene
+from harness.regression.trends import trend_plots
 from harness.regression.verdict import DEFAULT_TOLERANCE, HEADLINE, ToleranceSpec, image_change, judge_images, overall
 from harness.validation import InputModel, SweepSize, read_toml, validate
 
@@ -239,179 +240,6 @@ def judge_night(store, run_id, prev_run_id, references, scenes, size, tolerance,
     return {"changes": changes, "images": rows, "notes": notes, "family": family}
 
 
-def trend_series(store, night_run_ids):
-    """``{(scene, metric): {line: [(night, badness)]}}``: one line per configuration over the nights.
-
-    An SSLPV line is ``(mapping, N, steps, settings)``, where ``settings`` is the label's non-default
-    part (``skip=0``), so that two configurations of one mapping stay two lines; another method's
-    is ``("method M", 0, its label, "")``.
-    """
-    from harness.regression.verdict import badness
-
-    series = {}
-    for rid, night in night_run_ids:
-        for c in store.configs(run_id=rid):
-            if c["status"] != "ok":
-                continue
-            p = c["params"]
-            method = c.get("method", "sslpv")
-            for metric in HEADLINE:
-                m = c["metrics"].get("subsurface", {}).get(metric)
-                if m is not None:
-                    key = (c["scene"], metric)
-                    line = (p.get("mapping"), p.get("N"), p.get("steps"), get_method("sslpv").settings_label(p)) \
-                        if method == "sslpv" else (f"method {method}", 0, method_label(method, p), "")
-                    series.setdefault(key, {}).setdefault(line, []).append((night, badness(metric, m["value"])))
-    return series
-
-
-def trend_plots(store, night_run_ids, out_dir):
-    """Per scene and headline metric: the subsurface value over the last :data:`TREND_NIGHTS` nights,
-    one line per configuration (:func:`trend_series`), and one legend for all of them.
-
-    One panel per mapping; colour is the grid resolution N, line style the step count;
-    the y axis is the metric's badness (distance from its ideal) on a log scale. The
-    legend (``trend_legend.png``) is drawn once: every figure of a night shows the
-    matrix's configurations with the same colours and styles. The figures are independent of
-    each other, so from :data:`TRENDS_PARALLEL_FROM` figures on they are drawn in processes of
-    their own, one per core (matplotlib draws in one thread).
-    """
-    night_run_ids = list(night_run_ids)[-TREND_NIGHTS:]
-    series = sorted(trend_series(store, night_run_ids).items())
-    nights = [night for _, night in night_run_ids]
-    lines = sorted({line for _, ls in series for line in ls}, key=_line_order)
-    style = _trend_styles(lines)
-    jobs = [(scene, metric, ls, nights, style, str(out_dir)) for (scene, metric), ls in series]
-    workers = min(len(jobs), os.cpu_count() or 1)
-    if workers > 1 and len(jobs) >= TRENDS_PARALLEL_FROM:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            names = list(pool.map(_trend_figure, jobs, chunksize=max(len(jobs) // (4 * workers), 1)))
-    else:
-        names = [_trend_figure(job) for job in jobs]
-    if jobs:
-        _trend_legend(lines, style, Path(out_dir) / TREND_LEGEND)
-    return [{"scene": scene, "metric": metric, "file": name} for (scene, metric, *_), name in zip(jobs, names)]
-
-
-#: Trend figures are drawn in parallel (one process per core) from this many on.
-TRENDS_PARALLEL_FROM = 8
-#: The nights a trend figure shows, newest last (the store keeps them all).
-TREND_NIGHTS = 60
-#: The legend image shared by a night's trend figures.
-TREND_LEGEND = "trend_legend.png"
-
-
-def _line_order(line):
-    from harness.report.plots import steps_key
-
-    mapping, n, k, extra = line
-    return (str(mapping), n, steps_key(k), extra)
-
-
-def _line_label(line):
-    mapping, n, k, extra = line
-    return (f"N{n} K{k}" + (f" {extra}" if extra else "")) if n else str(k)
-
-
-def _trend_styles(lines):
-    """``{label: (colour, line style)}``: colour is N (viridis), style the step count; a rival's line black."""
-    import matplotlib
-
-    from harness.report.plots import steps_key
-
-    grids = sorted({line[1] for line in lines if line[1]})
-    steps = sorted({line[2] for line in lines if line[1]}, key=steps_key)
-    rivals = sorted({line[2] for line in lines if not line[1]})
-    styles = ["-", "--", ":", "-."]
-    out = {}
-    for line in lines:
-        _, n, k, _ = line
-        if n:
-            colour = matplotlib.colormaps["viridis"](grids.index(n) / max(len(grids) - 1, 1))
-            out[_line_label(line)] = (tuple(float(c) for c in colour), styles[steps.index(k) % len(styles)])
-        else:
-            out[_line_label(line)] = ((0.0, 0.0, 0.0, 1.0), styles[rivals.index(k) % len(styles)])
-    return out
-
-
-def _trend_figure(job):
-    """One trend figure of :func:`trend_plots` -> its file name."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import matplotlib.ticker
-
-    scene, metric, lines, nights, style, out_dir = job
-    x_of = {night: i for i, night in enumerate(nights)}
-    mappings = sorted({k[0] for k in lines})
-    w, h = 4.2 * len(mappings) + 0.9, 3.2
-    fig, axes = plt.subplots(1, len(mappings), figsize=(w, h), squeeze=False, sharey=True)
-    for ax, mapping in zip(axes[0], mappings):
-        for line, pts in sorted(lines.items(), key=lambda kv: _line_order(kv[0])):
-            if line[0] != mapping:
-                continue
-            colour, ls = style[_line_label(line)]
-            ax.plot([x_of[p[0]] for p in pts], [max(p[1], 1e-6) for p in pts], marker="o", ms=3, lw=1,
-                    color=colour, ls=ls)
-        ax.set_yscale("log")
-        # No minor ticks and at most six dates: on log axes shared by several panels, ticks and their
-        # labels are most of a figure's time, and the nights' values need only the decades.
-        ax.yaxis.set_minor_locator(matplotlib.ticker.NullLocator())
-        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(6, integer=True))
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(
-            lambda v, _pos: str(nights[int(v)]) if float(v).is_integer() and 0 <= int(v) < len(nights) else ""))
-        ax.set_xlim(-0.5, len(nights) - 0.5)
-        ax.set_title(mapping if str(mapping).startswith("method ") else f"mapping={_short_mapping(mapping)}",
-                     fontsize=9)
-        ax.tick_params(axis="x", labelrotation=30, labelsize=7)
-    ideal = "|x - 1|" if metric == "energy_ratio" else "value"
-    axes[0][0].set_ylabel(f"{metric} ({ideal})")
-    fig.suptitle(f"{scene}: {metric} of the subsurface image per night (lower is better; legend: "
-                 f"{TREND_LEGEND})", fontsize=10)
-    # Fixed margins in inches (y label, rotated dates, title) instead of tight_layout, which lays
-    # every tick label out again.
-    fig.subplots_adjust(left=0.75 / w, right=1 - 0.15 / w, bottom=0.75 / h, top=1 - 0.55 / h, wspace=0.08)
-    name = f"trend_{scene}_{metric}.png"
-    fig.savefig(Path(out_dir) / name, dpi=90)
-    plt.close(fig)
-    return name
-
-
-def _trend_legend(lines, style, path):
-    """The legend of every trend figure: one entry per line label, in columns."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-
-    from harness.report.plots import steps_key
-
-    # SSLPV's by N, then K; the rivals' after them.
-    ordered = sorted(lines, key=lambda ln: (0, ln[1], steps_key(ln[2]), ln[3]) if ln[1] else (1, 0, 0, str(ln[2])))
-    labels = list(dict.fromkeys(_line_label(line) for line in ordered))
-    rows = 12
-    ncol = -(-len(labels) // rows)
-    width = ncol * (0.5 + 0.045 * max(len(lab) for lab in labels))
-    fig = plt.figure(figsize=(width, 0.2 * min(rows, len(labels)) + 0.5))
-    handles = [Line2D([], [], color=style[lab][0], ls=style[lab][1], marker="o", ms=3, lw=1) for lab in labels]
-    fig.legend(handles, labels, loc="center", ncol=ncol, fontsize=7, frameon=False,
-               title="colour: grid N; line style: steps K (SSLPV); black: a rival's configuration",
-               title_fontsize=7)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def _short_mapping(mapping):
-    """A panel title: a calibrated mapping by its file's last two path parts, not the whole path."""
-    m = str(mapping)
-    return "calibrated:" + "/".join(m.split(":", 1)[1].split("/")[-2:]) if m.startswith("calibrated:") else m
-
-
 def _render(template, **ctx):
     import jinja2
 
@@ -476,6 +304,7 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
     run_id = summary["run_id"]
     tol = matrix["tolerance"]
     from harness.regression.verdict import ALPHA, IMAGE_ATOL, IMAGE_RTOL
+    t_start = time.perf_counter()
     with Store(store_path) as st:
         nights = [(r["id"], (r.get("config") or {}).get("out", "").rsplit("/", 1)[-1] or r["date"])
                   for r in st.runs(kind="nightly") if r["status"] == "finished"]
@@ -484,6 +313,8 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
         judged = judge_night(st, run_id, prev[0] if prev else None, summary["references"], matrix["scenes"],
                              matrix["size"], tol)
         changes = judged["changes"]
+        t_judged = time.perf_counter()
+        steps.log(f"verdicts: {len(judged['images'])} image comparisons in {t_judged - t_start:.1f} s")
         tonight = [c for c in st.configs(run_id=run_id) if c["status"] == "ok"]
         reused = {(c["scene"], _label(c)) for c in tonight if c.get("cached_from")}
         fresh = [c for c in tonight if not c.get("cached_from")]
@@ -494,11 +325,15 @@ def _judge_and_report(matrix, store_path, out_root, night, summary, steps):
         steps.advance(detail=f"verdict: {verdict}")
         night_dir = out_root / night
         with atomic_dir(night_dir) as tmp:
+            t0 = time.perf_counter()
             build_report(store_path, tmp / "report", run_id=run_id, title=f"SSLPV nightly {night}")
+            t1 = time.perf_counter()
             latest = {}
             for rid, d in nights:
                 latest[d] = rid  # a re-run of the same night replaces it in the trend
             trends = trend_plots(st, sorted(((rid, d) for d, rid in latest.items()), key=lambda x: x[1]), tmp)
+            steps.log(f"the sweep report in {t1 - t0:.1f} s; {len(trends)} trend figures in "
+                      f"{time.perf_counter() - t1:.1f} s")
             order = {"regression": 0, "improvement": 1, "changed-within-noise": 2}
             shown = sorted(changes, key=lambda c: (order[c.verdict], -abs(c.z) if np.isfinite(c.z) else -1e308))
             info = {"date": night, "verdict": verdict, "run_id": run_id, "git_commit": st.run(run_id)["git_commit"],
