@@ -14,6 +14,10 @@ model (with the LOO rows) to ``cost_model.json`` and the table to ``docs/referen
 32x32, 8 seeds x ``--spp``; a grid of sigma_t, albedo and g) and stores the points in
 ``cost_model.json``. Its seconds carry the machine's load at the time; its noise does not.
 
+``--pilot [SCENE ...]`` sets the render's own pilot beside the cost model on each suite scene: the
+prediction after the pilot's first round (logged within the first minute), after the whole pilot,
+and the measured final render; it writes ``docs/reference_pilot.md``.
+
 ``--check SCENE[:WxH|:committed] ...`` compares ``reference --estimate`` (today's integrator
 choices) with a real render's wall time, or with the committed reference's.
 
@@ -22,6 +26,7 @@ Usage::
     .venv/bin/python benchmarks/bench_reference_cost.py --fit                 # seconds, renders nothing
     .venv/bin/python benchmarks/bench_reference_cost.py --measure-family      # about 3 minutes on 2 cores
     .venv/bin/python benchmarks/bench_reference_cost.py --check marble_sphere:committed
+    .venv/bin/python benchmarks/bench_reference_cost.py --pilot                # minutes: renders the cheap scenes
 """
 
 import argparse
@@ -294,6 +299,99 @@ def do_check(specs):
               f"{factor(est['predicted_seconds'], measured):+.1f}", flush=True)
 
 
+PILOT_DOC = ROOT / "docs" / "reference_pilot.md"
+
+
+def pilot_row(name, full_below):
+    """One suite scene at its committed reference's size and target: the cost model's prediction of the
+    final render, the pilot's after its first round and after both, and the final render's measured wall
+    time: rendered now when the committed reference took less than ``full_below`` seconds, else the
+    committed reference's (its wall time less its pilot's)."""
+    from harness.reference.committed import REF_DIR
+    from harness.reference.render import render_reference
+
+    meta_c = json.loads((REF_DIR / name / "reference.json").read_text())
+    scene = load_scene(name).with_resolution(meta_c["width"], meta_c["height"])
+    target = meta_c["target_rel_se"]
+    full = meta_c["wall_seconds"] < full_below
+    load = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        meta = render_reference(scene, f"{tmp}/ref", target_rel_se=target, K=meta_c["K"],
+                                max_seconds=None if full else 1.0, progress=False)
+    pilot = meta["pilot"]
+    if full:
+        measured, how = meta["rounds"][-1]["seconds"] - pilot["elapsed_seconds"], "rendered now"
+    else:
+        slots = meta_c.get("slots") or 1
+        measured = meta_c["wall_seconds"] - (meta_c.get("pilot") or {}).get("seconds", 0.0) / slots
+        how = "the committed reference" + (" (other integrator choices)" if meta_c.get("passes") != meta["passes"]
+                                           or meta_c.get("integrator", {}).get("rr_depth")
+                                           != meta["integrator"].get("rr_depth") else "")
+    return {"scene": name, "size": f"{meta['width']}x{meta['height']}", "target": target, "load": load,
+            "model_s": pilot.get("cost_model_seconds"), "early_at_s": pilot["early"]["elapsed_seconds"],
+            "early_s": pilot["early"]["predicted_wall_seconds"], "pilot_at_s": pilot["elapsed_seconds"],
+            "pilot_s": pilot["predicted_wall_seconds"], "measured_s": measured, "how": how,
+            "target_met_now": meta["target_met"] if full else None}
+
+
+def do_pilot(names, full_below, path=PILOT_DOC):
+    from harness.reference.committed import REF_DIR
+
+    rows = []
+    for name in names or sorted(p.name for p in REF_DIR.iterdir() if (p / "reference.json").is_file()):
+        r = pilot_row(name, full_below)
+        rows.append(r)
+        print(f"{name:<24} model {r['model_s'] or float('nan'):>8.1f} s | first round at {r['early_at_s']:>6.1f} s: "
+              f"{r['early_s']:>8.1f} s | pilot at {r['pilot_at_s']:>6.1f} s: {r['pilot_s']:>8.1f} s | measured "
+              f"{r['measured_s']:>8.1f} s ({r['how']})", flush=True)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip() or "unknown"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".", f":!{path.relative_to(ROOT)}"],
+                           cwd=ROOT, capture_output=True, text=True).stdout.strip()
+
+    def fx(pred, meas):
+        return f"{factor(pred, meas):+.1f}" if pred and meas and meas > 0 else "—"
+
+    def mark(pred, meas):
+        return "" if pred and meas and abs(factor(pred, meas)) <= 2 else " ✗"
+
+    early_late = [r["scene"] for r in rows if r["early_at_s"] > 60]
+    off_model = [r for r in rows if not r["model_s"] or abs(factor(r["model_s"], r["measured_s"])) > 2]
+    off_early = [r for r in off_model if abs(factor(r["early_s"], r["measured_s"])) > 2]
+    lines = ["# The reference's pilot against the cost model", "",
+             f"Written by `.venv/bin/python benchmarks/bench_reference_cost.py --pilot --full-below {full_below:g}` at "
+             f"commit `{commit}`{' (with uncommitted changes)' if dirty else ''}, "
+             f"{datetime.now(timezone.utc).isoformat(timespec='seconds')}, on {os.cpu_count()} cores. "
+             "Do not edit by hand.", "",
+             "Each suite scene's reference at its committed size and target, serial renderer. Every figure is "
+             "the final render's wall time (the pilot excluded): predicted by the cost model before anything "
+             "renders (`reference --estimate`, today's integrator choices), by the pilot after its first round "
+             "(4 of 16 samples per seed; `at`: seconds after the start, when the log prints it), by the whole "
+             f"pilot, and measured: rendered now where the committed reference took under {full_below:g} s, "
+             "else the committed reference's (wall time less its pilot; rendered on another day's load, some "
+             "with other integrator choices, so those factors are indicative only). Factor: predicted / "
+             "measured, negative when under; ✗ beyond a factor of 2.", "",
+             "| scene | size | target | cost model s | factor | first round at s | its prediction s | factor "
+             "| pilot at s | its prediction s | factor | measured s | measured how | load before |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        m = r["measured_s"]
+        lines.append(f"| {r['scene']} | {r['size']} | {r['target']:.1%} | "
+                     f"{r['model_s'] or float('nan'):.1f} | {fx(r['model_s'], m)}{mark(r['model_s'], m)} | "
+                     f"{r['early_at_s']:.1f} | {r['early_s']:.1f} | {fx(r['early_s'], m)}{mark(r['early_s'], m)} | "
+                     f"{r['pilot_at_s']:.1f} | {r['pilot_s']:.1f} | {fx(r['pilot_s'], m)}{mark(r['pilot_s'], m)} | "
+                     f"{m:.1f} | {r['how']} | {r['load']:.1f} |")
+    lines += ["", f"The cost model is within a factor of 2 on {len(rows) - len(off_model)} of {len(rows)} scenes; "
+              f"on the other {len(off_model)} ({', '.join(r['scene'] for r in off_model) or 'none'}) the pilot's "
+              f"first round is within a factor of 2 on {len(off_model) - len(off_early)}"
+              + (f" (not on {', '.join(r['scene'] for r in off_early)})" if off_early else "")
+              + f". The first round's prediction was logged within the first minute on "
+              f"{len(rows) - len(early_late)} of {len(rows)} scenes"
+              + (f" (later on {', '.join(early_late)})" if early_late else "") + ".", ""]
+    path.write_text("\n".join(lines))
+    print(f"wrote {path}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fit", action="store_true", help="fit on the committed references and the family, run LOO")
@@ -301,6 +399,10 @@ def main():
     ap.add_argument("--spp", type=int, default=32, help="samples per pixel per seed for --measure-family (8 seeds)")
     ap.add_argument("--out", default=str(cost.MODEL_FILE), help="model file")
     ap.add_argument("--doc", default=str(DOC), help="markdown table written by --fit")
+    ap.add_argument("--pilot", nargs="*", metavar="SCENE", help="the pilot's predictions against the cost model's "
+                    "on suite scenes (default: all), written to docs/reference_pilot.md")
+    ap.add_argument("--full-below", type=float, default=150.0, help="--pilot renders to the target a scene whose "
+                    "committed reference took under this many seconds (else pilot and first step only)")
     ap.add_argument("--check", nargs="*", metavar="SCENE[:WxH|:committed]", help="compare prediction and measurement")
     args = ap.parse_args()
     if args.measure_family:
@@ -309,6 +411,8 @@ def main():
         do_fit(args.out, args.doc)
     if args.check:
         do_check(args.check)
+    if args.pilot is not None:
+        do_pilot(args.pilot, args.full_below)
 
 
 if __name__ == "__main__":

@@ -88,7 +88,7 @@ def test_prediction_adds_up_its_parts():
     assert spp == 8 * per_seed
     assert spp_s == pytest.approx(row["covered"] * row["passes"] * t / 2.0, rel=1e-12)
     assert final == pytest.approx(spp * spp_s + 0.5 / 2.0 * 8 * 3 * row["passes"], rel=1e-12)
-    assert render_s == pytest.approx(final + 64 * spp_s + 0.5 / 2.0 * 4 * row["passes"] + 2.0 / 2.0 * row["passes"],
+    assert render_s == pytest.approx(final + 64 * spp_s + 0.5 / 2.0 * 4 * 2 * row["passes"] + 2.0 / 2.0 * row["passes"],
                                      rel=1e-12)
 
 

@@ -398,6 +398,7 @@ class ReferencePlan:
         self.capped_by = None
         self.rounds, self.pilot = [], None
         self.cost = None                   # seconds per spp of one (pass, seed) unit, measured
+        self.job_overhead = 0.0            # seconds per job (mi.render call) besides its samples (cost model)
         self.job_seconds, self.jobs_run, self.reruns, self.jobs_rolled_back = 0.0, 0, 0, 0
         self.job_cpu_seconds = 0.0
         self.workers = set()
@@ -446,6 +447,7 @@ class ReferencePlan:
         self._round_spp["spp"] += result["spp"]
         self._round_spp["seconds"] = self._round_spp.get("seconds", 0.0) + result["seconds"]
         self._round_spp["jobs"] = self._round_spp.get("jobs", 0) + 1
+        self._round_spp.setdefault("each", []).append((result["spp"], result["seconds"]))
         if self._round_est is self.final:
             self._show()
 
@@ -479,9 +481,20 @@ class ReferencePlan:
         return median_rel_se(sm, sse, lit_mask(sm, self.coverage))
 
     def _measure_cost(self):
-        r = self._round_spp
-        if r.get("spp"):
-            self.cost = r["seconds"] / r["spp"]
+        """Seconds per sample from the round just rendered: a job's time is ``overhead + spp x cost``.
+
+        The overhead per job (kernel launch, readback) is the cost model's ``c_job``: two pilot
+        rounds at 4 and 12 samples per job time it too noisily on a small image (jobs of 10 to
+        30 ms). Jobs that compiled a kernel (the first of a process at each new sample count)
+        are slow outliers, so the round counts the lower quartile of its jobs' times.
+        """
+        each = self._round_spp.get("each")
+        if not each:
+            return
+        spp = float(np.median([n for n, _ in each]))
+        t = float(np.percentile([sec / n * spp for n, sec in each], 25))
+        overhead = min(self.job_overhead, 0.5 * t)
+        self.cost = (t - overhead) / spp
 
     def _round_wall(self, spp):
         """Predicted wall seconds to add ``spp`` samples to every (pass, seed) of the final estimate."""
@@ -489,7 +502,8 @@ class ReferencePlan:
             return 0.0
         units = len(self.passes) * self.K
         chunks = math.ceil(spp / self.chunk_spp)
-        return math.ceil(units * chunks / self.slots) * (spp / chunks) * self.cost
+        overhead = min(self.job_overhead, spp / chunks * self.cost)
+        return math.ceil(units * chunks / self.slots) * (overhead + spp / chunks * self.cost)
 
     def _spp_for(self, r_now, n_now, k_now):
         """spp per final seed predicted to reach the target (SE ~ 1/sqrt(N); median-of-SE bias corrected)."""
@@ -526,6 +540,7 @@ class ReferencePlan:
                               f"{PILOT_SPP - PILOT_EARLY_SPP}; {len(self.passes)} pass"
                               f"{'es' if len(self.passes) > 1 else ''}, {self.executor})")
             self.pilot = {"K": PILOT_K, "spp": PILOT_SPP, "cost_model_seconds": model}
+            self.job_overhead = self._cost_model_job_seconds()
             yield pilot, pilot.jobs(PILOT_EARLY_SPP, self.chunk_spp)
             self._measure_cost()
             r_e, want_e, capped_e = self._pilot_predict(pilot, PILOT_EARLY_SPP)
@@ -539,7 +554,9 @@ class ReferencePlan:
             r_p, want, capped = self._pilot_predict(pilot, PILOT_SPP)
             self.pilot.update({"median_rel_se_subsurface": r_p,
                                "seconds": seconds + self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
-                               "predicted_wall_seconds": self._round_wall(want)})
+                               "predicted_wall_seconds": self._round_wall(want),
+                               "job_overhead_seconds": self.job_overhead, "seconds_per_spp": self.cost,
+                               "elapsed_seconds": time.perf_counter() - self.t_start})
             self.progress.log(self._prediction_line(r_p, want, capped))
         n_steps = self.steps or (1 if self.spp_fixed is not None else min(STEPS, max(1, want // STEP_MIN_SPP)))
         step_size = max(1, math.ceil(want / n_steps))
@@ -586,6 +603,16 @@ class ReferencePlan:
                 want = new
                 self.progress.update(total=K * want)
         self.capped_by = self.capped_by or capped
+
+    @staticmethod
+    def _cost_model_job_seconds():
+        """The cost model's seconds per job besides its samples (0 where it has none)."""
+        from harness.reference.cost import load_model
+
+        try:
+            return float(load_model()["time"]["c_job"])
+        except (OSError, KeyError, ValueError, TypeError, InputError):
+            return 0.0
 
     def _cost_model_seconds(self):
         """What the cost model (``reference --estimate``, :func:`harness.reference.cost.estimate_reference`)
