@@ -110,12 +110,30 @@ def family_entries(points):
     return out
 
 
+#: The suite's references rendered to their targets by ``--pilot --full-below inf`` on one machine, at
+#: one commit, with today's integrator choices: their ``reference.json`` metadata, which ``--fit`` uses
+#: in place of the committed references' (rendered over weeks, under other loads and other choices).
+MEASURED = ROOT / "harness" / "reference" / "cost_suite.json"
+
+
+def measured_metas():
+    """``{scene: reference.json}`` of :data:`MEASURED` (``{}`` when absent) and its header."""
+    if not MEASURED.is_file():
+        return {}, {}
+    data = json.loads(MEASURED.read_text())
+    return data.get("refs", {}), {k: v for k, v in data.items() if k != "refs"}
+
+
 def load_refs(cores_model):
+    """One entry per suite scene: its reference measured by ``--pilot`` where there is one, else the
+    committed reference's metadata."""
     from harness.reference.committed import REF_DIR
 
+    measured, _ = measured_metas()
     entries = []
     for f in sorted(Path(REF_DIR).glob("*/reference.json")):
         meta = json.loads(f.read_text())
+        meta = measured.get(meta["scene"], meta)
         scene = load_scene(meta["scene"])
         summ = cost.medium_summary(scene)
         entries.append(ref_entry(meta, summ, cores_model, todays_choice(scene, summ)))
@@ -170,13 +188,20 @@ def write_doc(rows, model, command, path=DOC):
                             ":!docs/reference_cost.md", ":!harness/reference/cost_model.json"], cwd=ROOT,
                            capture_output=True, text=True).stdout.strip()
     n2 = sum(abs(r["factor_loo"]) <= 2 for r in rows)
+    measured, hdr = measured_metas()
     lines = ["# Reference cost model: leave-one-scene-out validation",
              "", f"Written by `{command}` at commit `{commit}`{' (with uncommitted changes)' if dirty else ''}, "
              f"{model['fitted']}. Do not edit by hand.", "",
              "Model: `harness/reference/cost.py` (its docstring states the form, the features and the limits). "
-             "Measured: each committed small reference's wall time to its target and its samples "
-             "(`baselines/refs/<scene>/reference.json`), rendered with the integrator choices recorded there; "
-             "each prediction below uses those same recorded choices. LOO: fitted without the scene, "
+             (f"Measured: each suite scene's small reference rendered to its target, serially, with today's "
+              f"integrator choices, by `{hdr.get('command')}` at commit `{hdr.get('commit')}` on "
+              f"{hdr.get('cores')} cores, last updated {hdr.get('updated')} "
+              f"(`harness/reference/cost_suite.json`: {len(measured)} scenes); "
+              if measured else "") +
+             "where a scene has no such measurement, the committed small reference's wall time to its target "
+             "and its samples (`baselines/refs/<scene>/reference.json`), rendered with the integrator choices "
+             "recorded there; each prediction below uses the choices its measurement recorded. "
+             "LOO: fitted without the scene, "
              "on the 13 others and the 32x32 family. Factor: predicted / measured, negative when under "
              "(-2.0 = half the measured).", "",
              f"Within a factor of 2 (LOO): {n2} of {len(rows)} scenes. Time model RMS log error "
@@ -319,6 +344,8 @@ def pilot_row(name, full_below):
         meta = render_reference(scene, f"{tmp}/ref", target_rel_se=target, K=meta_c["K"],
                                 max_seconds=None if full else 1.0, progress=False)
     pilot = meta["pilot"]
+    if full and meta["target_met"]:
+        _keep_measured(meta)
     if full:
         measured, how = meta["rounds"][-1]["seconds"] - pilot["elapsed_seconds"], "rendered now"
     else:
@@ -332,6 +359,21 @@ def pilot_row(name, full_below):
             "early_s": pilot["early"]["predicted_wall_seconds"], "pilot_at_s": pilot["elapsed_seconds"],
             "pilot_s": pilot["predicted_wall_seconds"], "measured_s": measured, "how": how,
             "target_met_now": meta["target_met"] if full else None}
+
+
+def _keep_measured(meta):
+    """Add one reference's metadata to :data:`MEASURED` (written after each scene: an interrupted run keeps
+    what it measured)."""
+    import mitsuba
+
+    refs, _ = measured_metas()
+    refs[meta["scene"]] = meta
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip() or "unknown"
+    MEASURED.write_text(json.dumps({"command": "benchmarks/bench_reference_cost.py --pilot --full-below inf",
+                                    "commit": commit, "cores": os.cpu_count(), "mitsuba": mitsuba.__version__,
+                                    "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                                    "refs": dict(sorted(refs.items()))}, indent=1, default=float) + "\n")
 
 
 def do_pilot(names, full_below, path=PILOT_DOC):
