@@ -192,7 +192,7 @@ def write_doc(rows, model, command, path=DOC):
     lines = ["# Reference cost model: leave-one-scene-out validation",
              "", f"Written by `{command}` at commit `{commit}`{' (with uncommitted changes)' if dirty else ''}, "
              f"{model['fitted']}. Do not edit by hand.", "",
-             "Model: `harness/reference/cost.py` (its docstring states the form, the features and the limits). "
+             "Model: `harness/reference/cost.py` (its docstring states the form, the features and the limits). " +
              (f"Measured: each suite scene's small reference rendered to its target, serially, with today's "
               f"integrator choices, by `{hdr.get('command')}` at commit `{hdr.get('commit')}` on "
               f"{hdr.get('cores')} cores, last updated {hdr.get('updated')} "
