@@ -33,7 +33,7 @@ EDIT = ("sslpv_gl/shaders/shade.frag", "out_sub  = vec4(sub, 1.0);", "out_sub  =
 
 
 def _night(clone, day, log):
-    t0 = time.perf_counter()
+    t0, t0_wall = time.perf_counter(), time.time()
     with open(log, "w") as err:
         proc = subprocess.run(["bash", "scripts/nightly.sh", "--json", "--date", day], cwd=clone, text=True,
                               stdout=subprocess.PIPE, stderr=err)
@@ -47,11 +47,41 @@ def _night(clone, day, log):
     if night_json.is_file():
         info = json.loads(night_json.read_text())
     return {"date": day, "wall_s": wall, "exit": proc.returncode, "verdict": result.get("verdict"),
+            "phases": _phases(log, t0_wall, wall),
             "configurations": result.get("configurations"), "failed": result.get("failed"),
             "rendered": len(info.get("rendered", [])), "reused": info.get("reused"),
             "regressions": result.get("regressions"), "improvements": result.get("improvements"),
             "changed_images": result.get("changed_images"), "rendered_methods": info.get("rendered_methods", {}),
             "rendered_list": info.get("rendered", [])}
+
+
+def _phases(log, t0, wall):
+    """Where a night's time went, from its log's timestamped lines: setup (until the nightly's first line),
+    the references and the sweep (until "sweep finished"), the verdicts, the sweep report, the trends,
+    and the rest (the night's page, the index, the process's exit)."""
+    import re
+    from datetime import datetime, timezone
+
+    stamps, secs = {}, {}
+    for line in Path(log).read_text().splitlines():
+        m = re.match(r"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ) (.*)", line)
+        if not m:
+            continue
+        t = datetime.strptime(m.group(1), "%Y-%m-%dT%H:%M:%SZ").replace(tzinfo=timezone.utc).timestamp() - t0
+        msg = m.group(2)
+        if msg.startswith("nightly:"):
+            stamps.setdefault("start", t)
+        if "sweep finished" in msg:
+            stamps["swept"] = t
+        if (v := re.search(r"image comparisons in ([\d.]+) s", msg)):
+            secs["verdicts"] = float(v.group(1))
+        if (v := re.search(r"the sweep report in ([\d.]+) s; (\d+) trend figures in ([\d.]+) s", msg)):
+            secs["report"], secs["trends"] = float(v.group(1)), float(v.group(3))
+    if "start" not in stamps or "swept" not in stamps:
+        return {}
+    out = {"setup": stamps["start"], "sweep": stamps["swept"] - stamps["start"], **secs}
+    out["rest"] = wall - sum(out.values())
+    return out
 
 
 def _fmt_s(s):
@@ -103,6 +133,14 @@ def main(argv=None):
     for name, n in zip(names, nights):
         lines.append(f"| {name} | {_fmt_s(n['wall_s'])} | {n['exit']} | {n['verdict']} | {n['configurations']} | "
                      f"{n['rendered']} | {n['reused']} | {n['failed']} |")
+    lines += ["", "Where the time went (from each night's log; whole seconds for the phases the log stamps):", "",
+              "| night | setup | references and sweep | verdicts | sweep report | trend figures | the rest |",
+              "|---|---|---|---|---|---|---|"]
+    for name, n in zip(names, nights):
+        ph = n["phases"]
+        cells = [f"{ph[k]:.1f} s" if k in ph else "—" for k in ("setup", "sweep", "verdicts", "report", "trends",
+                                                                  "rest")]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     third = nights[2]
     lines += ["", f"After the edit (`{old}` → `{new}`) the night rendered "
               + ", ".join(f"{v} configurations of {k}" for k, v in sorted(third["rendered_methods"].items()))
