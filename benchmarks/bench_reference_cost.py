@@ -327,18 +327,20 @@ def do_check(specs):
 PILOT_DOC = ROOT / "docs" / "reference_pilot.md"
 
 
-def pilot_row(name, full_below):
+def pilot_row(name, full_below, reuse=False):
     """One suite scene at its committed reference's size and target: the cost model's prediction of the
     final render, the pilot's after its first round and after both, and the final render's measured wall
     time: rendered now when the committed reference took less than ``full_below`` seconds, else the
-    committed reference's (its wall time less its pilot's)."""
+    committed reference's (its wall time less its pilot's). ``reuse``: where :data:`MEASURED` has the
+    scene, render the pilot only and take the measured final render from there."""
     from harness.reference.committed import REF_DIR
     from harness.reference.render import render_reference
 
     meta_c = json.loads((REF_DIR / name / "reference.json").read_text())
     scene = load_scene(name).with_resolution(meta_c["width"], meta_c["height"])
     target = meta_c["target_rel_se"]
-    full = meta_c["wall_seconds"] < full_below
+    kept = measured_metas()[0].get(name) if reuse else None
+    full = meta_c["wall_seconds"] < full_below and kept is None
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         meta = render_reference(scene, f"{tmp}/ref", target_rel_se=target, K=meta_c["K"],
@@ -348,6 +350,9 @@ def pilot_row(name, full_below):
         _keep_measured(meta)
     if full:
         measured, how = meta["rounds"][-1]["seconds"] - pilot["elapsed_seconds"], "rendered now"
+    elif kept is not None:
+        measured = kept["rounds"][-1]["seconds"] - kept["pilot"]["elapsed_seconds"]
+        how = f"rendered to the target {kept.get('bench_when', 'earlier')} (`cost_suite.json`)"
     else:
         slots = meta_c.get("slots") or 1
         measured = meta_c["wall_seconds"] - (meta_c.get("pilot") or {}).get("seconds", 0.0) / slots
@@ -367,7 +372,7 @@ def _keep_measured(meta):
     import mitsuba
 
     refs, _ = measured_metas()
-    refs[meta["scene"]] = meta
+    refs[meta["scene"]] = dict(meta, bench_when=datetime.now(timezone.utc).isoformat(timespec="minutes"))
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                             text=True).stdout.strip() or "unknown"
     MEASURED.write_text(json.dumps({"command": "benchmarks/bench_reference_cost.py --pilot --full-below inf",
@@ -376,12 +381,12 @@ def _keep_measured(meta):
                                     "refs": dict(sorted(refs.items()))}, indent=1, default=float) + "\n")
 
 
-def do_pilot(names, full_below, path=PILOT_DOC):
+def do_pilot(names, full_below, path=PILOT_DOC, reuse=False):
     from harness.reference.committed import REF_DIR
 
     rows = []
     for name in names or sorted(p.name for p in REF_DIR.iterdir() if (p / "reference.json").is_file()):
-        r = pilot_row(name, full_below)
+        r = pilot_row(name, full_below, reuse)
         rows.append(r)
         print(f"{name:<24} model {r['model_s'] or float('nan'):>8.1f} s | first round at {r['early_at_s']:>6.1f} s: "
               f"{r['early_s']:>8.1f} s | pilot at {r['pilot_at_s']:>6.1f} s: {r['pilot_s']:>8.1f} s | measured "
@@ -401,15 +406,19 @@ def do_pilot(names, full_below, path=PILOT_DOC):
     off_model = [r for r in rows if not r["model_s"] or abs(factor(r["model_s"], r["measured_s"])) > 2]
     off_early = [r for r in off_model if abs(factor(r["early_s"], r["measured_s"])) > 2]
     lines = ["# The reference's pilot against the cost model", "",
-             f"Written by `.venv/bin/python benchmarks/bench_reference_cost.py --pilot --full-below {full_below:g}` at "
+             f"Written by `.venv/bin/python benchmarks/bench_reference_cost.py --pilot --full-below {full_below:g}"
+             f"{' --reuse-measured' if reuse else ''}` at "
              f"commit `{commit}`{' (with uncommitted changes)' if dirty else ''}, "
              f"{datetime.now(timezone.utc).isoformat(timespec='seconds')}, on {os.cpu_count()} cores. "
              "Do not edit by hand.", "",
              "Each suite scene's reference at its committed size and target, serial renderer. Every figure is "
              "the final render's wall time (the pilot excluded): predicted by the cost model before anything "
-             "renders (`reference --estimate`, today's integrator choices), by the pilot after its first round "
+             "renders (`reference --estimate`, today's integrator choices; fitted on every scene, this one "
+             "included: its leave-one-scene-out error is in `docs/reference_cost.md`), by the pilot after its first round "
              "(4 of 16 samples per seed; `at`: seconds after the start, when the log prints it), by the whole "
-             f"pilot, and measured: rendered now where the committed reference took under {full_below:g} s, "
+             f"pilot, and measured: rendered to the target by this command (or, with `--reuse-measured`, by its "
+             "earlier run, kept in `harness/reference/cost_suite.json`) where the committed reference took under "
+             f"{full_below:g} s, "
              "else the committed reference's (wall time less its pilot; rendered on another day's load, some "
              "with other integrator choices, so those factors are indicative only). Factor: predicted / "
              "measured, negative when under; ✗ beyond a factor of 2.", "",
@@ -445,6 +454,8 @@ def main():
                     "on suite scenes (default: all), written to docs/reference_pilot.md")
     ap.add_argument("--full-below", type=float, default=150.0, help="--pilot renders to the target a scene whose "
                     "committed reference took under this many seconds (else pilot and first step only)")
+    ap.add_argument("--reuse-measured", action="store_true", help="--pilot renders only the pilot of a scene "
+                    "that harness/reference/cost_suite.json has rendered to its target, and takes its time from there")
     ap.add_argument("--check", nargs="*", metavar="SCENE[:WxH|:committed]", help="compare prediction and measurement")
     args = ap.parse_args()
     if args.measure_family:
@@ -454,7 +465,7 @@ def main():
     if args.check:
         do_check(args.check)
     if args.pilot is not None:
-        do_pilot(args.pilot, args.full_below)
+        do_pilot(args.pilot, args.full_below, reuse=args.reuse_measured)
 
 
 if __name__ == "__main__":

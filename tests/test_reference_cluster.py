@@ -364,3 +364,15 @@ def test_marble_scene_carries_jensen_2001_measured_marble():
     assert 2 * 60.0 * 0.99 < diameter <= 120.0
     assert np.all(diameter * m.sigma_t[0, 0, 0] > 250)          # 263 (red) to 361 (blue) mean free paths
     assert grid_inside(scene.mesh, m.bbox_min, m.bbox_max, m.resolution).any()
+
+
+def test_unit_cost_averages_the_passes_and_drops_compiling_jobs():
+    """Three grey passes at 1, 2 and 6 ms per sample, 4 seeds each, one job per pass compiling (+2 s): the cost
+    of a unit is their mean, 3 ms, less the per-job overhead; the lower quartile over all jobs (1 ms, the
+    cheapest channel) or the mean with the compiling jobs (about 4.4 ms) is not."""
+    from harness.reference.render import unit_cost
+
+    jobs = [(p, 100, rate * 100 + (2.0 if s == 0 else 0.0) + 0.01) for p, rate in (("r", 1e-3), ("g", 2e-3),
+                                                                                    ("b", 6e-3)) for s in range(4)]
+    assert unit_cost(jobs, overhead=0.01) == pytest.approx(3e-3, rel=1e-9)
+    assert unit_cost(jobs) == pytest.approx(3.1e-3, rel=1e-9)

@@ -105,6 +105,20 @@ RENDER_COUNT = 0             # how many times a reference was rendered (tests ch
 
 # --------------------------------------------------------------------------- statistics
 
+def unit_cost(jobs, overhead=0.0):
+    """Seconds per sample of one (pass, seed) unit from a round's ``jobs`` ``[(pass, spp, seconds)]``.
+
+    Per pass, the lower quartile of its jobs' seconds (scaled to the round's median sample count):
+    a job that compiled a kernel is a slow outlier. The passes' figures are averaged (a grey pass per
+    colour channel costs what its channel's sigma_t makes it cost), and ``overhead`` seconds per job
+    (at most half a job's time) are not counted as samples.
+    """
+    spp = float(np.median([n for _, n, _ in jobs]))
+    t = float(np.mean([np.percentile([sec / n * spp for q, n, sec in jobs if q == p], 25)
+                       for p in sorted({q for q, _, _ in jobs})]))
+    return (t - min(overhead, 0.5 * t)) / spp
+
+
 def seed_stats(stack):
     """Mean and standard error over the first axis (independent seeds): ``std(ddof=1)/sqrt(K)``."""
     stack = np.asarray(stack, dtype=np.float64)
@@ -447,7 +461,7 @@ class ReferencePlan:
         self._round_spp["spp"] += result["spp"]
         self._round_spp["seconds"] = self._round_spp.get("seconds", 0.0) + result["seconds"]
         self._round_spp["jobs"] = self._round_spp.get("jobs", 0) + 1
-        self._round_spp.setdefault("each", []).append((result["spp"], result["seconds"]))
+        self._round_spp.setdefault("each", []).append((job.pass_name, result["spp"], result["seconds"]))
         if self._round_est is self.final:
             self._show()
 
@@ -486,15 +500,13 @@ class ReferencePlan:
         The overhead per job (kernel launch, readback) is the cost model's ``c_job``: two pilot
         rounds at 4 and 12 samples per job time it too noisily on a small image (jobs of 10 to
         30 ms). Jobs that compiled a kernel (the first of a process at each new sample count)
-        are slow outliers, so the round counts the lower quartile of its jobs' times.
+        are slow outliers, so each pass counts the lower quartile of its jobs' times; the passes
+        (one per colour channel where sigma_t differs between channels) cost differently, and a
+        unit's cost is their mean.
         """
         each = self._round_spp.get("each")
-        if not each:
-            return
-        spp = float(np.median([n for n, _ in each]))
-        t = float(np.percentile([sec / n * spp for n, sec in each], 25))
-        overhead = min(self.job_overhead, 0.5 * t)
-        self.cost = (t - overhead) / spp
+        if each:
+            self.cost = unit_cost(each, self.job_overhead)
 
     def _round_wall(self, spp):
         """Predicted wall seconds to add ``spp`` samples to every (pass, seed) of the final estimate."""
