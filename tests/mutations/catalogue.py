@@ -376,7 +376,7 @@ MUTATIONS = (
              ("tests/test_result_cache.py::test_corrupt_and_foreign_entries_are_rendered_again",),
              "result cache: an entry's images served without checking them against their recorded hash"),
     Mutation("reference_json_silences_progress", "metric", "harness/cli/reference.py",
-             "progress=not args.no_progress)", "progress=not (args.no_progress or args.json))",
+             "progress=args.progress)", "progress=args.progress and not args.json)",
              ("tests/test_progress.py::test_json_never_silences_progress",),
              "reference --json: progress on stderr turned off by --json"),
     # ------------------------------------------------------------------ the rivals' chunks and spot check
