@@ -37,6 +37,14 @@ class TestUsage:
         assert exc.value.code == 0
         assert capsys.readouterr().out.strip() == f"sslpv-harness {version()}"
 
+    @pytest.mark.parametrize("argv,needle", [
+        (["rendr", "thin_ring"], "sslpv-harness: command: unknown command 'rendr'; did you mean render?"),
+        (["baselines", "shw"], "sslpv-harness baselines: command: unknown command 'shw'; did you mean show?"),
+    ])
+    def test_misspelt_command_offers_the_closest(self, capsys, argv, needle):
+        assert main(argv) == 2
+        assert needle in _one_error_line(capsys)
+
     def test_sub_command_options_are_its_own(self, capsys):
         """``--into`` belongs to regenerate-references only; update refuses it, naming itself."""
         assert main(["baselines", "update", "--store", "s.sqlite", "--into", "x"]) == 2

@@ -83,7 +83,7 @@ def _usage_error(prog, message):
     m = re.match(r"argument (\S+?)(?:/\S+)?: (.*)", message)
     if m:
         if m.group(1) in ("COMMAND", "ACTION"):
-            return UsageError(prog, "command", m.group(2).replace("invalid choice: ", "unknown command "), fix)
+            return _unknown_command(prog, m.group(2), fix)
         return at(m.group(1), m.group(2))
     m = re.match(r"the following arguments are required: (.*)", message)
     if m:
@@ -96,6 +96,19 @@ def _usage_error(prog, message):
                               f"value; see `{prog} --help`")
         return at(word, f"is not an option of `{prog}`")
     return UsageError(prog, "arguments", message, fix)
+
+
+def _unknown_command(prog, problem, fix):
+    """``invalid choice: 'rendr' (choose from ...)`` -> ``unknown command 'rendr'; did you mean render? ...``."""
+    import difflib
+
+    m = re.match(r"invalid choice: '([^']*)' \(choose from (.*)\)", problem)
+    if not m:
+        return UsageError(prog, "command", problem, fix)
+    choices = re.findall(r"'([^']*)'", m.group(2))
+    close = difflib.get_close_matches(m.group(1), choices, n=1, cutoff=0.6)
+    hint = f"did you mean {close[0]}? " if close else ""
+    return UsageError(prog, "command", f"unknown command {m.group(1)!r}", f"{hint}one of: {', '.join(choices)}")
 
 
 def build_parser():
