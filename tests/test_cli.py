@@ -81,6 +81,16 @@ class TestCompare:
         assert list(result)[:2] == ["ref", "test"] and result["ref"] == str(ref)
 
 
+    def test_images_too_small_for_a_metric_are_one_line(self, tmp_path, capsys):
+        from harness.io.images import write_exr
+
+        for name in ("ref.exr", "test.exr"):
+            write_exr(tmp_path / name, np.full((8, 8, 3), 0.5, np.float32))
+        assert main(["compare", str(tmp_path / "ref.exr"), str(tmp_path / "test.exr")]) == 2
+        line = _one_error_line(capsys)
+        assert "test.exr: metrics: ssim: images of 8x8 are smaller than the 11x11 window" in line, line
+
+
 class TestExport:
     @pytest.fixture
     def store(self, tmp_path):

@@ -255,5 +255,14 @@ def configure(sp):
 
 
 def run(args):
-    result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json, all_pixels=args.all_pixels)
+    try:
+        result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json,
+                             all_pixels=args.all_pixels)
+    except InputError:
+        raise
+    except ValueError as exc:
+        # A metric that cannot be computed on these images (smaller than SSIM's window, a black
+        # reference, a mask in SSIM's border): the metric's own sentence, as one line.
+        raise InputError(args.test, "metrics", str(exc).split(";")[0],
+                         "compare larger images, or other pixels (--mask, --all-pixels)") from None
     return result, None if args.json else format_table(result), 0
