@@ -51,6 +51,23 @@ class TestUsage:
         assert "--into: into: is not an option of `sslpv-harness baselines update`" in _one_error_line(capsys)
 
 
+class TestFlags:
+    @pytest.mark.parametrize("flags,values", [([], None), (["--eta2"], [True]), (["--no-eta2"], [False]),
+                                              (["--eta2", "--no-eta2"], [True, False])])
+    def test_sweep_takes_a_boolean_as_flags(self, tmp_path, flags, values):
+        """A sweep's boolean is ``--eta2`` and/or ``--no-eta2``; both sweep both values."""
+        from harness.cli.main import build_parser
+        from harness.runs.sweep import config_from_args
+
+        args = build_parser().parse_args(["sweep", "--out", str(tmp_path / "s"), "--scenes", "thin_ring", *flags])
+        assert config_from_args(args).params.get("eta2") == values
+
+    def test_render_takes_a_flag_not_a_word(self, tmp_path, capsys, monkeypatch):
+        monkeypatch.chdir(tmp_path)
+        assert main(["render", "thin_ring", "--out", "o", "--eta2", "true"]) == 2
+        assert "'true' is not expected here; a flag such as --eta2 takes no value" in _one_error_line(capsys)
+
+
 class TestScenes:
     def test_misspelt_scene_names_the_path_once_and_the_closest_scene(self, tmp_path, capsys, monkeypatch):
         monkeypatch.chdir(tmp_path)

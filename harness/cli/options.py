@@ -200,17 +200,30 @@ def _add_param(sp, method, cli, field, multi, owners=None):
     help_text = _param_help(method, field, multi, owners)
     if method.field_types()[field] in ("bool", bool):
         # A flag: the value reaches the parameter parser as the word it reads (harness.methods.params.convert).
-        sp.add_argument("--" + cli.replace("_", "-"), dest=cli, action=_WordFlag, help=help_text)
+        if multi:
+            help_text += "; give both flags to sweep both values"
+        sp.add_argument("--" + cli.replace("_", "-"), dest=cli, action=_WordFlag, help=help_text, const=multi)
     else:
         sp.add_argument("--" + cli.replace("_", "-"), dest=cli, metavar=_metavar(cli, multi), help=help_text)
 
 
 class _WordFlag(Flag):
-    """``--eta2`` -> ``"true"``, ``--no-eta2`` -> ``"false"``, absent -> None (the parameter's default)."""
+    """``--eta2`` -> ``"true"``, ``--no-eta2`` -> ``"false"``, absent -> None (the parameter's default).
+
+    On a sweep (``const=True``) both flags together give the list ``"true,false"``, in the order given.
+    """
+
+    def __init__(self, option_strings, dest, const=False, **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.multi = const
 
     def __call__(self, parser, namespace, values, option_string=None):
         if option_string in self.option_strings:
-            setattr(namespace, self.dest, "false" if option_string.startswith("--no-") else "true")
+            word = "false" if option_string.startswith("--no-") else "true"
+            old = getattr(namespace, self.dest, None)
+            if self.multi and old is not None and word not in old.split(","):
+                word = f"{old},{word}"
+            setattr(namespace, self.dest, word)
 
 
 def _metavar(cli, multi):
