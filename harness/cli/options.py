@@ -94,8 +94,8 @@ def positive_number(value):
 
 
 class Flag(argparse.BooleanOptionalAction):
-    """``--name / --no-name``; the help states the default itself (argparse 3.9-3.12 would append
-    ``(default: ...)`` a second time)."""
+    """``--name / --no-name``; the help states the default itself, so argparse's own ``(default: ...)``
+    suffix, which some Python versions add to this action, is taken off again."""
 
     def __init__(self, option_strings, dest, default=None, help=None, **kwargs):
         super().__init__(option_strings, dest, default=default, help=help, **kwargs)
@@ -104,8 +104,9 @@ class Flag(argparse.BooleanOptionalAction):
 
 # --------------------------------------------------------------------------- shared options
 
-def add_scene(sp, what="the scene"):
-    sp.add_argument("scene", help=f"{what}: a suite scene's name (`sslpv-harness scenes` lists them), or a "
+def add_scene(sp):
+    """The one scene of a command, positional."""
+    sp.add_argument("scene", help="the scene: a suite scene's name (`sslpv-harness scenes` lists them), or a "
                     "scene folder or scene.toml")
 
 
@@ -130,13 +131,12 @@ def add_size(sp, forms, default="the scene's own size"):
                     help=f"{SHARED['--size']}: " + ", ".join(words[f] for f in forms) + f" (default: {default})")
 
 
-def add_cluster(sp, serial=False, workers=True):
+def add_cluster(sp, serial=False):
     """``--scheduler``, ``--workers`` and, where a command can render without Dask, ``--serial``."""
     sp.add_argument("--scheduler", metavar="ADDR", help=f"{SHARED['--scheduler']} whose workers have this project "
                     "installed (default: a LocalCluster on this machine)")
-    if workers:
-        sp.add_argument("--workers", type=positive_int, metavar="N",
-                        help=f"{SHARED['--workers']}, an integer > 0 (default: the CPU cores)")
+    sp.add_argument("--workers", type=positive_int, metavar="N",
+                    help=f"{SHARED['--workers']}, an integer > 0 (default: the CPU cores)")
     if serial:
         sp.add_argument("--serial", action="store_true", help=SHARED["--serial"])
 
