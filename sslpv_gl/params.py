@@ -45,7 +45,8 @@ def _p(default, doc):
 class SSLPVParams:
     """Renderer settings (Borlum et al. 2011; paper defaults where it states them)."""
 
-    N: int = _p(32, "LPV grid resolution per axis (paper: 32^3), in [4, 256]")
+    N: int = _p(32, "LPV grid resolution per axis (paper: 32^3), in [4, 256]; odd sizes too (the dispatch "
+                    "rounds up and every shader stops at the grid's edge)")
     steps: int | str = _p(32, "propagation steps K (paper: 8 or 32), in [0, 1024]; 'auto': until the grid holds "
                               "less than converge_tol of the injected flux; 'steady': the converged sum, solved "
                               "directly (sslpv_gl.steady)")
@@ -114,6 +115,10 @@ class SSLPVParams:
         if not isinstance(self.eta2, bool):
             bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")
         if isinstance(self.steps, int) and self.skip > self.steps:
+            # Name the setting the user changed: --steps when --skip is at its default.
+            if self.skip == SSLPVParams.skip:
+                bad("steps", f"{self.steps} is fewer than the {self.skip} steps that --skip leaves out by default "
+                    "(nothing would be accumulated)", f"give --steps {self.skip} or more, or lower --skip")
             bad("skip", f"skip {self.skip} must not exceed steps {self.steps} (nothing would be accumulated)",
                 "lower --skip")
 

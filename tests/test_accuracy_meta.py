@@ -57,7 +57,7 @@ def test_deliberate_error_fails(renderer, monkeypatch, tmp_path, scene, params, 
     # The failure leaves what a person needs: images, error map, and the accepting command.
     assert (broken.artifacts / "error_map.png").is_file()
     assert (broken.artifacts / "subsurface.exr").is_file() and (broken.artifacts / "store.sqlite").is_file()
-    assert "sslpv-harness baselines update --scene" in text
+    assert "sslpv-harness baselines update --scenes" in text
 
 
 def speckled(img, seed=0):
@@ -73,7 +73,7 @@ def test_an_improvement_fails_with_the_accept_command(renderer, tmp_path):
     img, mask = committed_image(scene, entry)
     res = check_case(renderer, scene, params, TOL, artifacts=tmp_path, old=(speckled(img), mask))
     assert res.verdict == "improvement", res.message()
-    assert "accept the improvement" in res.message() and "baselines update --scene thin_ring" in res.message()
+    assert "accept the improvement" in res.message() and "baselines update --scenes thin_ring" in res.message()
 
 
 RESEEDED_SCENES = sorted(p.name for p in RESEEDED.iterdir()) if RESEEDED.is_dir() else []

@@ -295,6 +295,17 @@ CLI_CASES = [
     ("scene-unknown", ["sweep", "--out", "o", "--scenes", "no_such_scene"], "--scenes: scenes: unknown scene 'no_such_scene'"),
     ("option-unknown", SWEEP + ["--bogus"], "--bogus: bogus: is not an option of `sslpv-harness sweep`"),
     ("out-required", ["render", "thin_ring"], "--out: out: is required"),
+    ("render-grid-word", ["render", "thin_ring", "--out", "o", "--grid", "abc"],
+     "--grid: grid: 'abc' is not an integer; write an integer, e.g. 32"),
+    ("render-steps-0", ["render", "thin_ring", "--out", "o", "--steps", "0"],
+     "--steps: steps: 0 is fewer than the 2 steps that --skip leaves out by default"),
+    ("render-skip-over-steps", ["render", "thin_ring", "--out", "o", "--steps", "4", "--skip", "5"],
+     "--skip: skip: skip 5 must not exceed steps 4"),
+    ("render-scene-misspelt", ["render", "thn_ring", "--out", "o"], "scene: no such scene file; did you mean thin_ring?"),
+    ("sweep-scene-misspelt", ["sweep", "--out", "o", "--scenes", "thin_rnig"],
+     "--scenes: scenes: unknown scene 'thin_rnig'; did you mean thin_ring?"),
+    ("eta2-word", ["render", "thin_ring", "--out", "o", "--eta2", "true"], "'true' is not expected"),
+    ("baselines-no-action", ["baselines", "frobnicate"], "sslpv-harness baselines: command: unknown command"),
     ("render-size-not-wxh", ["render", "thin_ring", "--out", "o", "--size", "64"],
      "--size: size: '64' is not WIDTHxHEIGHT; write e.g. 128x128, or small"),
     ("render-size-zero", ["render", "thin_ring", "--out", "o", "--size", "0x64"], "--size: size: '0x64' is not WIDTHxHEIGHT"),
@@ -308,15 +319,17 @@ CLI_CASES = [
     ("budget-nan", ["report", "{store}", "--out", "r", "--budget-ms", "nan"], "--budget-ms: budget_ms: must be a "
                                                                              "finite number > 0, got 'nan'"),
     ("budget-negative", ["report", "{store}", "--out", "r", "--budget-ms", "-5"], "--budget-ms: budget_ms:"),
-    ("export-run-999", ["export", "{store}", "--out", "x.csv", "--run", "999"], "run_id: run 999 does not exist; "
+    ("export-run-999", ["export", "{store}", "--out", "x", "--run", "999"], "run_id: run 999 does not exist; "
                                                                                 "pick one of 1"),
-    ("export-scene-nosuch", ["export", "{store}", "--out", "x.csv", "--scene", "nosuch"], "scene: no configuration "
+    ("export-scene-nosuch", ["export", "{store}", "--out", "x", "--scenes", "nosuch"], "scene: no configuration "
                                                                                          "is of scene 'nosuch'"),
-    ("export-format", ["export", "{store}", "--out", "x.txt"], "x.txt: format: unknown extension '.txt'"),
+    ("export-format", ["export", "{store}", "--out", "x", "--format", "txt"], "--format: format: invalid choice"),
+    ("export-out-a-file", ["export", "{store}", "--out", "x.csv"], "--out: out: 'x.csv' names a file, but --out is a "
+                                                                  "folder; write --out . --format csv"),
     ("report-run-999", ["report", "{store}", "--out", "r", "--run", "999"], "run_id: run 999 does not exist"),
     ("out-is-a-file", SWEEP + ["--out", "afile.txt"], "afile.txt: output: exists and is not a folder"),
     ("out-in-proc", SWEEP + ["--out", "/proc/sslpv/out"], "/proc/sslpv/out: output: /proc"),
-    ("out-under-a-file", ["export", "{store}", "--out", "afile.txt/x.csv"], "output: cannot be created: "),
+    ("out-under-a-file", ["export", "{store}", "--out", "afile.txt/x"], "output: cannot be created: "),
     ("config-and-flags", ["sweep", "--config", "s.json", "--grid", "8"], "--grid: grid: cannot be combined with "
                                                                           "--config"),
 ]
@@ -415,7 +428,7 @@ def readonly(tmp_path):
 
 def test_outputs_in_a_readonly_folder(cli, tmp_path, store, readonly):
     cli(SWEEP + ["--out", readonly / "out"], readonly / "out", "output:", "is not writable")
-    cli(["export", store, "--out", readonly / "x.csv"], readonly / "x.csv", "output:", "is not writable")
+    cli(["export", store, "--out", readonly / "x"], readonly / "x", "output:", "is not writable")
     cli(["report", store, "--out", readonly / "site"], readonly / "site", "output:", "is not writable")
     cli(["render", "thin_ring", "--out", readonly / "r"], readonly / "r", "output:", "is not writable")
     cli(SWEEP + ["--out", tmp_path / "s", "--store", readonly / "s.sqlite"], readonly / "s.sqlite",
@@ -520,7 +533,7 @@ def test_foreign_sqlite_is_refused_untouched(cli, tmp_path):
     db.execute("INSERT INTO songs VALUES ('a')")
     db.commit()
     db.close()
-    cli(["export", other, "--out", tmp_path / "x.csv"], other, "another program's SQLite database")
+    cli(["export", other, "--out", tmp_path / "x"], other, "another program's SQLite database")
     cli(["report", other, "--out", tmp_path / "r"], other, "another program's SQLite database")
     cli(SWEEP + ["--out", tmp_path / "s", "--store", other], other, "another program's SQLite database")
     with sqlite3.connect(other) as db:
@@ -531,12 +544,12 @@ def test_foreign_sqlite_is_refused_untouched(cli, tmp_path):
 def test_corrupt_newer_and_folder_stores(cli, tmp_path, store):
     text = tmp_path / "notes.sqlite"
     text.write_text("not a database at all, but long enough to have a header of one hundred bytes ......\n" * 3)
-    cli(["export", text, "--out", tmp_path / "x.csv"], text, "file: is not an SQLite database")
+    cli(["export", text, "--out", tmp_path / "x"], text, "file: is not an SQLite database")
     db = sqlite3.connect(store)
     db.execute("PRAGMA user_version = 99")
     db.commit()
     db.close()
-    cli(["export", store, "--out", tmp_path / "x.csv"], store, "schema: store schema v99 is newer")
+    cli(["export", store, "--out", tmp_path / "x"], store, "schema: store schema v99 is newer")
     cli(["report", tmp_path / "nothing", "--out", tmp_path / "r"], "nothing: store: does not exist")
 
 
@@ -559,8 +572,8 @@ def test_store_in_a_readonly_folder_is_read(tmp_path, store, readonly):
     shutil.copy(store, readonly / "store.sqlite")
     readonly.chmod(0o555)
     subprocess.run(["chattr", "+i", str(readonly)], capture_output=True)
-    assert main(["export", str(readonly / "store.sqlite"), "--out", str(tmp_path / "x.csv"), "--json"]) == 0
-    assert len((tmp_path / "x.csv").read_text().splitlines()) == 3
+    assert main(["export", str(readonly / "store.sqlite"), "--out", str(tmp_path / "x"), "--json"]) == 0
+    assert len((tmp_path / "x" / "results.csv").read_text().splitlines()) == 3
     with pytest.raises(InputError, match=r"store.sqlite: folder: .* is not writable, and a store writes its journal"):
         Store(readonly / "store.sqlite")
 

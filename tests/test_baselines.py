@@ -52,7 +52,7 @@ class TestValidation:
         from harness.regression.accuracy import small_scene
 
         with pytest.raises(InputError, match=r"refs/thin_ring: reference: is missing; run `sslpv-harness baselines "
-                                             r"regenerate-references --scene thin_ring`"):
+                                             r"regenerate-references --scenes thin_ring`"):
             baselines.committed_reference(small_scene("thin_ring"))
 
     def _entry(self, scene="thin_ring"):
@@ -104,7 +104,7 @@ class TestValidation:
     def test_update_with_no_store(self, capsys):
         assert main(["baselines", "update"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "--store: store: no results store given" in err[0]
+        assert len(err) == 1 and "--store: store: is required" in err[0]
 
     def test_update_with_missing_store(self, tmp_path, capsys):
         assert main(["baselines", "update", "--store", str(tmp_path / "nope.sqlite")]) == 2
@@ -128,30 +128,48 @@ class TestValidation:
         assert (sandbox / "thin_ring.json").read_text() == before
 
 
+def _store_with_a_changed_entry(sandbox, tmp_path):
+    """A store whose latest run holds thin_ring N16-K8 with every value x 1.5 and a flat image:
+    ``(store, params, old entry, image)``."""
+    from harness.io.images import write_exr
+    from harness.regression.accuracy import small_scene
+    from harness.store import Store
+    from sslpv_gl.params import SSLPVParams
+
+    scene = small_scene("thin_ring")
+    params = SSLPVParams(N=16, steps=8).as_dict()
+    old = baselines.find_entry(baselines.read_baseline("thin_ring"), [64, 64], params)
+    rows = [{"image": img, "metric": m, "value": v["value"] * 1.5, "noise_floor": v["noise_floor"],
+             "per_channel": None, "params": {}}
+            for img, ms in old["metrics"].items() for m, v in ms.items()]
+    render = tmp_path / "render"
+    render.mkdir()
+    img = np.full((64, 64, 3), 0.25, np.float32)
+    write_exr(render / "subsurface.exr", img, extra={"mask": np.ones((64, 64), np.float32)})
+    store = tmp_path / "store.sqlite"
+    with Store(store) as st:
+        rid = st.start_run("accuracy", {}, gl_renderer="test GL")
+        st.record_config(rid, "thin_ring", scene.content_hash, params, "ok", metrics=rows,
+                         render_dir=str(render), reference_dir=str(sandbox / "refs" / "thin_ring"))
+    return store, params, old, img
+
+
 class TestUpdate:
+    def test_show_with_a_store_prints_what_update_would_change_and_writes_nothing(self, sandbox, tmp_path, capsys):
+        store, _, old, _ = _store_with_a_changed_entry(sandbox, tmp_path)
+        files = {p: p.read_bytes() for p in sandbox.rglob("*") if p.is_file()}
+        assert main(["baselines", "show", "--store", str(store)]) == 0
+        out = capsys.readouterr().out
+        assert "baseline update" in out and "N16-K8" in out and "before" in out
+        assert main(["baselines", "show", "--store", str(store), "--json"]) == 0
+        changes = [c for c in json.loads(capsys.readouterr().out)["changes"] if c["metric"] == "relmse"]
+        assert changes[0]["before"] == pytest.approx(old["metrics"]["subsurface"]["relmse"]["value"])
+        assert changes[0]["after"] == pytest.approx(1.5 * changes[0]["before"])
+        assert {p: p.read_bytes() for p in sandbox.rglob("*") if p.is_file()} == files
+
     def test_update_shows_before_after_and_changes_only_that_entry(self, sandbox, tmp_path):
-        from harness.regression.accuracy import small_scene
-        from harness.store import Store
-        from sslpv_gl.params import SSLPVParams
-
-        scene = small_scene("thin_ring")
-        params = SSLPVParams(N=16, steps=8).as_dict()
         before_files = {p.name: p.read_text() for p in sandbox.glob("*.json")}
-        old = baselines.find_entry(baselines.read_baseline("thin_ring"), [64, 64], params)
-        rows = [{"image": img, "metric": m, "value": v["value"] * 1.5, "noise_floor": v["noise_floor"],
-                 "per_channel": None, "params": {}}
-                for img, ms in old["metrics"].items() for m, v in ms.items()]
-        from harness.io.images import write_exr
-
-        render = tmp_path / "render"
-        render.mkdir()
-        img = np.full((64, 64, 3), 0.25, np.float32)
-        write_exr(render / "subsurface.exr", img, extra={"mask": np.ones((64, 64), np.float32)})
-        store = tmp_path / "store.sqlite"
-        with Store(store) as st:
-            rid = st.start_run("accuracy", {}, gl_renderer="test GL")
-            st.record_config(rid, "thin_ring", scene.content_hash, params, "ok", metrics=rows,
-                             render_dir=str(render), reference_dir=str(sandbox / "refs" / "thin_ring"))
+        store, params, old, img = _store_with_a_changed_entry(sandbox, tmp_path)
         image_files = {p: p.read_bytes() for p in (sandbox / "images").rglob("*.exr")}
         res = baselines.update(store, scene="thin_ring")
         new = baselines.find_entry(baselines.read_baseline("thin_ring"), [64, 64], params)

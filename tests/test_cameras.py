@@ -158,7 +158,7 @@ def test_gl_against_committed_mitsuba_reference(gl_renderer, wide):
     info = json.loads((ref / "reference.json").read_text())
     assert info["content_hash"] == wide.content_hash, (
         "the committed wide_slab reference is for another scene version; run "
-        "`sslpv-harness baselines regenerate-references --scene wide_slab`")
+        "`sslpv-harness baselines regenerate-references --scenes wide_slab`")
     H, W = wide.camera.height, wide.camera.width
     full = read_exr(ref / "full.exr", expect_shape=(H, W))["rgb"]
     lit = full.max(axis=-1) > 0.0

@@ -40,7 +40,7 @@ def _scene_and_ref(name):
     info = json.loads((ref / "reference.json").read_text())
     assert info["content_hash"] == scene.content_hash, (
         f"{ref}: reference rendered for scene hash {info['content_hash'][:12]}, the scene now hashes to "
-        f"{scene.content_hash[:12]}; run `sslpv-harness baselines regenerate-references --scene {name}`")
+        f"{scene.content_hash[:12]}; run `sslpv-harness baselines regenerate-references --scenes {name}`")
     return scene, ref
 
 

@@ -117,7 +117,7 @@ class TestParams:
     @pytest.mark.parametrize("kwargs,needle", [
         ({"N": 0}, "N"), ({"N": 300}, "N"), ({"steps": -1}, "steps"), ({"mapping": "bogus"}, "mapping"),
         ({"lookup": "nearest"}, "lookup"), ({"precision": "fp64"}, "precision"), ({"resample": "x"}, "resample"),
-        ({"steps": 1, "skip": 2}, "--skip"), ({"eta2": 1}, "eta2"),
+        ({"steps": 1, "skip": 3}, "--skip"), ({"steps": 0}, "--steps: steps:"), ({"eta2": 1}, "eta2"),
     ])
     def test_bad_values_one_line(self, kwargs, needle):
         with pytest.raises(InputError) as err:
@@ -127,10 +127,13 @@ class TestParams:
 
     def test_skip_above_steps(self):
         with pytest.raises(InputError) as err:
-            SSLPVParams(steps=1, skip=2)
+            SSLPVParams(steps=1, skip=3)
         msg = str(err.value)
-        assert "skip 2 must not exceed steps 1 (nothing would be accumulated)" in msg
+        assert msg.startswith("--skip: skip: skip 3 must not exceed steps 1 (nothing would be accumulated)")
         assert "lower --skip" in msg and "\n" not in msg
+        with pytest.raises(InputError) as err:          # --skip at its default: the user changed --steps
+            SSLPVParams(steps=1)
+        assert str(err.value).startswith("--steps: steps: 1 is fewer than the 2 steps that --skip leaves out")
         SSLPVParams(steps=2, skip=2)                  # equal is allowed (empty accumulation)
         SSLPVParams(steps=0, skip=0)
 

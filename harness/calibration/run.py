@@ -117,7 +117,7 @@ def _reference(name, size):
             size = (int(meta["width"]), int(meta["height"]))
         except (OSError, ValueError, KeyError, TypeError):
             raise InputError(REF_DIR / scene.name, "reference", f"scene {name} has no committed small reference",
-                             f"run `sslpv-harness baselines regenerate-references --scene {name}`, or give "
+                             f"run `sslpv-harness baselines regenerate-references --scenes {name}`, or give "
                              "--size WxH of a cached reference") from None
     scene = scene.with_resolution(*size)
     folder = find_committed_reference(scene)

@@ -1,7 +1,6 @@
 """``sslpv-harness calibrate --family F --out DIR``: fit a mapping family to the references, per budget."""
 
-from pathlib import Path
-
+from harness.cli.options import add_out, add_progress, add_scenes, add_size
 from harness.errors import InputError
 
 HELP = "fit a mapping family's sigma_scale and radiance_scale to the references, per (N, steps) budget"
@@ -10,22 +9,25 @@ HELP = "fit a mapping family's sigma_scale and radiance_scale to the references,
 def configure(sp):
     from harness.calibration.families import FAMILIES
 
-    sp.add_argument("--family", required=True, help=f"mapping family: {' | '.join(FAMILIES)}")
-    sp.add_argument("--out", type=Path, required=True, help="output folder (calibrated.toml, calibration.json, "
-                    "index.html); new, empty, or written by calibrate before")
-    sp.add_argument("--scenes", help="comma-separated scene names, at least 2 (default: every index-matched "
-                    "suite scene)")
-    sp.add_argument("--grid", default="32", help="comma-separated LPV grid resolutions N of the budgets (default 32)")
-    sp.add_argument("--steps", default="8,16,32,64,steady",
-                    help="comma-separated step counts of the budgets, and/or steady (default 8,16,32,64,steady)")
-    sp.add_argument("--size", help="image size WxH of the references to fit against (default: each scene's "
-                    "committed small reference); a reference at that size must exist")
-    sp.add_argument("--sigma-range", dest="sigma_range", help="MIN,MAX of the scanned sigma_scale (default: the "
-                    "family's, 0.0625,64)")
-    sp.add_argument("--points", default="11", help="scanned sigma_scale values, log-spaced (default 11)")
-    sp.add_argument("--skip", help="renderer setting of the fit (default: the family's)")
-    sp.add_argument("--outside", help="renderer setting of the fit: vacuum | material | absorb | extrapolated | interior")
-    sp.add_argument("--no-progress", action="store_true", help="no progress on stderr")
+    sp.add_argument("--family", required=True, metavar="FAMILY", help=f"mapping family: {' | '.join(FAMILIES)}")
+    add_out(sp, "calibrated.toml, calibration.json, index.html; new, empty, or written by calibrate before",
+            required=True)
+    add_scenes(sp, default="every index-matched suite scene; at least 2")
+    sp.add_argument("--grid", default="32", metavar="N,...",
+                    help="comma-separated LPV grid resolutions N of the budgets, each in [4, 256] (default: 32)")
+    sp.add_argument("--steps", default="8,16,32,64,steady", metavar="K,...",
+                    help="comma-separated step counts of the budgets, each in [0, 1024], and/or steady "
+                         "(default: 8,16,32,64,steady)")
+    add_size(sp, ("WxH",), default="each scene's committed small reference; a reference at that size must exist")
+    sp.add_argument("--sigma-range", dest="sigma_range", metavar="MIN,MAX",
+                    help="the scanned sigma_scale range, 0 < MIN < MAX (default: the family's, 0.0625,64)")
+    sp.add_argument("--points", default="11", metavar="N", help="scanned sigma_scale values, log-spaced, an integer "
+                    "in [5, 64] (default: 11)")
+    sp.add_argument("--skip", metavar="SKIP", help="renderer setting of the fit: first propagation steps not "
+                    "accumulated, in [0, steps] (default: the family's)")
+    sp.add_argument("--outside", metavar="OUTSIDE", help="renderer setting of the fit: vacuum | material | absorb | "
+                    "extrapolated | interior (default: the family's)")
+    add_progress(sp)
 
 
 def _numbers(flag, text, kind):
@@ -70,5 +72,5 @@ def run(args):
                             scenes=resolve_scenes(args.scenes) if args.scenes else None,
                             grids=_numbers("--grid", args.grid, int), steps=_steps(args.steps),
                             size=tuple(size) if size else None, sigma_range=rng, points=points[0],
-                            settings=settings, progress=not args.no_progress, argv=args.argv)
+                            settings=settings, progress=args.progress, argv=args.argv)
     return summary, None if args.json else print_summary(summary), 0

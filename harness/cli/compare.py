@@ -245,15 +245,24 @@ HELP = "print every metric between two EXR files"
 
 
 def configure(sp):
-    sp.add_argument("ref", type=Path, help="reference EXR")
-    sp.add_argument("test", type=Path, help="test EXR")
-    sp.add_argument("--mask", type=Path, help="mask of the pixels to compare (.exr: R > 0.5; .png; .npy); default: "
+    sp.add_argument("ref", type=Path, help="the reference EXR (first: the heading and --json name it first)")
+    sp.add_argument("test", type=Path, help="the test EXR, compared with the reference")
+    sp.add_argument("--mask", type=Path, help="mask of the pixels to compare (.exr: R > 0.5; .png; .npy) (default: "
                     "the pixels the reference covers fully when its coverage is beside it (its mask layer or "
-                    "mask.exr), as a sweep compares, else every pixel")
+                    "mask.exr), as a sweep compares, else every pixel)")
     sp.add_argument("--all-pixels", dest="all_pixels", action="store_true",
                     help="compare every pixel, even where the reference's coverage is beside it")
 
 
 def run(args):
-    result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json, all_pixels=args.all_pixels)
+    try:
+        result = run_compare(args.ref, args.test, mask_path=args.mask, as_json=args.json,
+                             all_pixels=args.all_pixels)
+    except InputError:
+        raise
+    except ValueError as exc:
+        # A metric that cannot be computed on these images (smaller than SSIM's window, a black
+        # reference, a mask in SSIM's border): the metric's own sentence, as one line.
+        raise InputError(args.test, "metrics", str(exc).split(";")[0],
+                         "compare larger images, or other pixels (--mask, --all-pixels)") from None
     return result, None if args.json else format_table(result), 0

@@ -3,24 +3,25 @@
 from pathlib import Path
 
 from harness import paths
+from harness.cli.options import add_cluster, add_no_cache, add_out, add_progress, add_size, add_store
 
 HELP = "run the standard matrix, append to the store, write the nightly report"
 
 
 def configure(sp):
     sp.add_argument("--matrix", type=Path, default=paths.REPO / "harness" / "regression" / "nightly_matrix.toml",
-                    help="the standard matrix file")
-    sp.add_argument("--store", type=Path, default=paths.REPO / "reports" / "nightly.sqlite", help="results store")
-    sp.add_argument("--out", type=Path, default=paths.REPO / "reports" / "nightly", help="reports folder")
-    sp.add_argument("--date", help="night's date, YYYY-MM-DD (default: today)")
-    sp.add_argument("--scheduler", help="address of an existing Dask scheduler")
-    sp.add_argument("--method", help="comma-separated methods: run only the matrix's products of these "
-                                     "(sslpv | dipole | dirpole; default: every product of the matrix)")
-    sp.add_argument("--size", help="image size of the night: small (each scene at its committed small size, "
-                    "judged against the committed references and baselines), own (each scene's own size, its "
-                    "Mitsuba reference rendered into cache/references first) or WxH; default: the matrix's size")
-    sp.add_argument("--no-cache", action="store_true", help="render every configuration afresh instead of serving "
-                    "unchanged ones from the result cache (cache/results)")
+                    metavar="TOML", help="the standard matrix file (default: harness/regression/nightly_matrix.toml)")
+    add_store(sp, "the nights' results, read by the trends", default="reports/nightly.sqlite")
+    sp.set_defaults(store=paths.REPO / "reports" / "nightly.sqlite")
+    add_out(sp, "the nights' reports (DATE/ and index.html)", default="reports/nightly")
+    sp.set_defaults(out=paths.REPO / "reports" / "nightly")
+    sp.add_argument("--date", metavar="YYYY-MM-DD", help="the night's date (default: today)")
+    add_cluster(sp)
+    sp.add_argument("--method", metavar="M,...", help="comma-separated methods: run only the matrix's products of "
+                    "these (sslpv | dipole | dirpole; default: every product of the matrix)")
+    add_size(sp, ("small", "own", "WxH"), default="the matrix's size")
+    add_progress(sp)
+    add_no_cache(sp)
 
 
 def run(args):

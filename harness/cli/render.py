@@ -1,18 +1,15 @@
-"""``sslpv-harness render SCENE [--method M] [--size WxH|small] --grid N --steps K ... --out DIR``: one render
-of one method."""
+"""``sslpv-harness render SCENE [--method M] [--size WxH|small] [--grid N] [--steps K] ... --out DIR``: one
+render of one method."""
 
-from pathlib import Path
-
-from harness.cli.options import add_method_args, add_sslpv_args
+from harness.cli.options import add_method_args, add_out, add_scene, add_size, add_sslpv_args
 
 HELP = "render a scene with one method (default: the SSLPV GLSL renderer)"
 
 
 def configure(sp):
-    sp.add_argument("scene", help="suite scene name or path")
-    sp.add_argument("--out", type=Path, required=True, help="output folder")
-    sp.add_argument("--size", help="image size WxH, or small (the scene at its committed small size, the size of "
-                    "its committed reference; as `sweep --size small`); default: the scene's")
+    add_scene(sp)
+    add_out(sp, "the render (subsurface.exr, full.exr, render.json)", required=True)
+    add_size(sp, ("WxH", "small"))
     add_sslpv_args(sp, multi=False)
     add_method_args(sp, multi=False)
 

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from harness.cli.options import positive_number
+from harness.cli.options import add_out, add_run, positive_number
 from harness.errors import InputError
 
 
@@ -26,11 +26,11 @@ HELP = "build the static HTML report of a store or a sweep folder"
 
 
 def configure(sp):
-    sp.add_argument("source", type=Path, help="store.sqlite or a sweep folder")
-    sp.add_argument("--out", type=Path, required=True, help="output folder for the site")
-    sp.add_argument("--run", type=int, help="run id (default: the latest)")
-    sp.add_argument("--budget-ms", type=positive_number,
-                    help="SSLPV cost budget for the summary, ms > 0 (default: median cost)")
+    sp.add_argument("source", type=Path, help="store.sqlite, or a sweep folder holding one")
+    add_out(sp, "the static site (index.html; opens from the file system)", required=True)
+    add_run(sp, default="the latest")
+    sp.add_argument("--budget-ms", type=positive_number, metavar="MS",
+                    help="SSLPV cost budget for the summary, ms > 0 (default: the median cost)")
 
 
 def run(args):

@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from harness import paths
+from harness.cli.options import add_cluster, add_no_cache, add_out, add_progress, add_size
 
 HELP = "run an accuracy study (default: studies/default.toml) and write its map, tables and figures"
 
@@ -10,16 +11,13 @@ HELP = "run an accuracy study (default: studies/default.toml) and write its map,
 def configure(sp):
     sp.add_argument("study", nargs="?", type=Path, default=paths.REPO / "studies" / "default.toml",
                     help="the study file (default: studies/default.toml)")
-    sp.add_argument("--out", type=Path, help="the study's folder (new, empty, or an earlier study's); "
-                    "default with --docs: reports/study")
-    sp.add_argument("--size", help="small (each scene at its committed small size, against the committed "
-                    "references), own (each scene's own size; references rendered first) or WxH; default: the "
-                    "study file's")
+    add_out(sp, "the study's (index.html, results.csv, results.parquet, study.json, figures/); new, empty, or an "
+            "earlier study's; required without --docs", default="reports/study with --docs")
+    add_size(sp, ("small", "own", "WxH"), default="the study file's")
     sp.add_argument("--docs", action="store_true", help="then write docs/results.md and its figures from it")
-    sp.add_argument("--scheduler", help="address of an existing Dask scheduler")
-    sp.add_argument("--no-cache", action="store_true", help="render every configuration afresh instead of serving "
-                    "unchanged ones from the result cache (cache/results)")
-    sp.add_argument("--no-progress", action="store_true", help="no progress on stderr")
+    add_cluster(sp)
+    add_progress(sp)
+    add_no_cache(sp)
 
 
 def run(args):
@@ -37,8 +35,8 @@ def run(args):
     size = args.size
     size = "own" if size is not None and size.strip().lower() == "own" else parse_size(size)
     command = "sslpv-harness " + " ".join(shlex.quote(a) for a in args.argv if a != "--json")
-    result = run_study(args.study, out, size=size, scheduler=args.scheduler, progress=not args.no_progress,
-                       cache=not args.no_cache, command=command, rebuild=args.docs)
+    result = run_study(args.study, out, size=size, scheduler=args.scheduler, workers=args.workers,
+                       progress=args.progress, cache=not args.no_cache, command=command, rebuild=args.docs)
     built = result.pop("_built", None)
     if result["status"] != "finished":
         line = InputError(result["out"], "sweep", f"is incomplete: {result.get('error')}",

@@ -2,23 +2,22 @@
 
 from pathlib import Path
 
-from harness.cli.options import add_method_args, add_sslpv_args, positive_int
+from harness.cli.options import (add_cluster, add_method_args, add_no_cache, add_out, add_progress, add_scenes,
+                                 add_size, add_sslpv_args, add_store)
 
-HELP = "render every SSLPV configuration of a sweep and store its metrics"
+HELP = "render every configuration of a sweep (SSLPV by default) and store its metrics"
 
 
 def configure(sp):
-    sp.add_argument("--scenes", help="comma-separated scene names (default: the whole suite)")
-    sp.add_argument("--config", type=Path, help="re-run a sweep from the sweep.json it wrote")
-    sp.add_argument("--out", type=Path, help="output folder (holds store.sqlite, renders/, sweep.json)")
-    sp.add_argument("--store", type=Path, help="results store (default: OUT/store.sqlite)")
-    sp.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
-    sp.add_argument("--workers", type=positive_int, help="LocalCluster workers (default: CPU cores)")
-    sp.add_argument("--size", help="image size WxH for SSLPV and reference, or small (each scene at its committed "
-                    "small size, same aspect); default: the scene's")
-    sp.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    sp.add_argument("--no-cache", action="store_true", help="render every configuration afresh instead of serving "
-                    "it from the result cache (cache/results; harness.runs.cache)")
+    add_scenes(sp)
+    sp.add_argument("--config", type=Path, metavar="SWEEP_JSON", help="re-run a sweep from the sweep.json it wrote "
+                    "(default: the sweep the options describe)")
+    add_out(sp, "store.sqlite, renders/, sweep.json; required unless --config", default="--config's folder")
+    add_store(sp, "where the metrics go", default="OUT/store.sqlite")
+    add_cluster(sp)
+    add_size(sp, ("WxH", "small"), default="each scene's own size")
+    add_progress(sp)
+    add_no_cache(sp)
     add_sslpv_args(sp, multi=True)
     add_method_args(sp, multi=True)
 

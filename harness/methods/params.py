@@ -45,8 +45,9 @@ def convert(cli_name, text, type_name):
         if kind in ("float", float):
             return float(text)
     except ValueError:
-        raise InputError(flag(cli_name), cli_name, f"{text!r} is not a{'n integer' if kind in ('int', int) else ' number'}",
-                         "give numbers separated by commas, e.g. 16,32") from None
+        integer = kind in ("int", int)
+        raise InputError(flag(cli_name), cli_name, f"{text!r} is not a{'n integer' if integer else ' number'}",
+                         f"write {'an integer, e.g. 32' if integer else 'a number, e.g. 0.5'}") from None
     return text
 
 

@@ -60,7 +60,7 @@ def committed_reference(scene, ref_dir=None):
     """
     ref = (REF_DIR if ref_dir is None else ref_dir) / scene.name
     meta = ref / "reference.json"
-    fix = f"run `sslpv-harness baselines regenerate-references --scene {scene.name}`"
+    fix = f"run `sslpv-harness baselines regenerate-references --scenes {scene.name}`"
     if not meta.is_file():
         raise InputError(ref, "reference", "is missing", fix)
     info = json.loads(meta.read_text())

@@ -162,7 +162,7 @@ def check_case(renderer, scene_name, params, tolerance, ref=None, floors=None, a
 
         rows = measure({"subsurface": res.subsurface, "full": res.full}, ref, reference_floors(ref))
         result.artifacts = _write_artifacts(artifacts, scene, params, res, ref, rows)
-        result.command = (f"sslpv-harness baselines update --scene {scene_name} "
+        result.command = (f"sslpv-harness baselines update --scenes {scene_name} "
                           f"--store {result.artifacts / 'store.sqlite'}")
     return result
 

@@ -18,11 +18,12 @@ A baseline entry is ``{"size": [W, H], "scene_hash": ..., "config": label, "para
 
 Commands (``sslpv-harness baselines ...``):
 
-* ``update --store S [--scene X]``: replace the entries of the configurations found in the
-  store's latest run (for one scene, or all) and their committed images (copied from the
+* ``update --store S [--scenes A,B]``: replace the entries of the configurations found in the
+  store's latest run (for those scenes, or all) and their committed images (copied from the
   run's render folders), print a before/after table, change nothing else.
-* ``show [--scene X]``: print the entries.
-* ``regenerate-references [--scene X]``: render the small reference again with new seeds,
+* ``show [--store S] [--scenes A,B]``: print the entries as a table; with ``--store``, the
+  before/after table that ``update`` would write, writing nothing.
+* ``regenerate-references [--scenes A,B]``: render the small reference again with new seeds,
   check it against the committed one with a per-pixel two-sided z-test that uses both noise
   estimates, Bonferroni-corrected for the number of pixels (as Mitsuba's render tests do),
   and refuse it if they disagree.
@@ -121,7 +122,7 @@ def read_baseline(scene_name, check_scene=True):
                                  f"baseline was made for scene hash {e['scene_hash'][:12]} but the scene now "
                                  f"hashes to {expected[:12]}",
                                  f"if the scene change is intended, run `sslpv-harness baselines "
-                                 f"regenerate-references --scene {scene_name}` and then `baselines update`")
+                                 f"regenerate-references --scenes {scene_name}` and then `baselines update`")
     return data.get("entries", [])
 
 
@@ -162,7 +163,7 @@ def image_name(scene_name, label, size):
 def update_command(scene_name=None):
     """The one-line command that accepts new values and images (for messages)."""
     return ("run a `sweep --size small` of baselines/accuracy_matrix.toml and `sslpv-harness baselines update "
-            f"--store STORE{' --scene ' + scene_name if scene_name else ''}`")
+            f"--store STORE{' --scenes ' + scene_name if scene_name else ''}`")
 
 
 def committed_image(scene_name, entry):
@@ -195,6 +196,7 @@ def committed_image(scene_name, entry):
 # --------------------------------------------------------------------------- update
 
 def _rows_from_store(store_path, scene=None):
+    """The successful SSLPV configurations of the store's latest run (of the scenes in ``scene``, a list, when given)."""
     from harness.store import Store
 
     store_path = Path(store_path) if store_path else None
@@ -206,7 +208,7 @@ def _rows_from_store(store_path, scene=None):
         runs = [r for r in st.runs() if r.get("n_configs")]
         if not runs:
             raise InputError(store_path, "runs", "the store holds no configurations", "run a sweep first")
-        configs = st.configs(run_id=runs[-1]["id"], scene=scene)
+        configs = [c for c in st.configs(run_id=runs[-1]["id"]) if scene is None or c["scene"] in scene]
     # the baselines are SSLPV's (another method's configurations, harness.methods, have none)
     return [c for c in configs if c["status"] == "ok" and c.get("method", "sslpv") == "sslpv"], runs[-1]
 
@@ -225,13 +227,17 @@ def update(store_path, scene=None, yes=True, commit=None):
     from harness.runs.params import config_label
     from harness.store import git_commit
 
-    if scene is not None and not scene_path(scene).is_file():
-        raise InputError("--scene", "scene", f"unknown scene {scene!r}", f"choose from: {', '.join(list_scenes())}")
-    configs, run = _rows_from_store(store_path, scene)
+    wanted = [scene] if isinstance(scene, str) else scene
+    if wanted is not None:
+        from harness.runs.sweep import resolve_scenes
+
+        resolve_scenes(list(wanted), where="--scenes")
+    configs, run = _rows_from_store(store_path, wanted)
     gl = run.get("gl_renderer") or "unknown"
     if not configs:
-        raise InputError(store_path, "configurations", f"no successful configuration{' of ' + scene if scene else ''}"
-                         " in the latest run", "run the sweep for that scene first")
+        of = f" of {', '.join(wanted)}" if wanted else ""
+        raise InputError(store_path, "configurations", f"no successful configuration{of} in the latest run",
+                         "run the sweep for that scene first")
     changed, table, images = {}, [], {}
     now = datetime.now(timezone.utc).isoformat(timespec="seconds")
     for c in configs:
@@ -396,23 +402,66 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None, c
 
 # --------------------------------------------------------------------------- CLI
 
+def _scene_names(spec, known):
+    """``--scenes A,B`` -> names, each one of ``known`` (a misspelt one gets the closest name)."""
+    from harness.runs.sweep import resolve_scenes
+
+    names = resolve_scenes(spec)
+    for n in names:
+        if n not in known:
+            raise InputError("--scenes", "scenes", f"{n!r} has no committed baseline",
+                             f"choose from: {', '.join(known)}" if known else "run `baselines update` first")
+    return names
+
+
+def show_table(entries):
+    """The committed entries (``{scene: [entry]}``) as a text table: one row per scene, size and configuration."""
+    from io import StringIO
+
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="committed baselines (subsurface image)")
+    for col in ("scene", "size", "config", "relmse", "si_relmse", "energy_ratio", "flip", "updated", "commit"):
+        t.add_column(col, justify="left" if col in ("scene", "size", "config", "updated", "commit") else "right")
+    for name, rows in entries.items():
+        for e in rows:
+            m = e.get("metrics", {}).get("subsurface", {})
+            vals = [f"{m[k]['value']:.5g}" if k in m and m[k].get("value") is not None else "-"
+                    for k in ("relmse", "si_relmse", "energy_ratio", "flip")]
+            t.add_row(name, f"{e['size'][0]}x{e['size'][1]}", e["config"], *vals, str(e.get("updated", ""))[:10],
+                      str(e.get("git_commit") or "")[:10])
+    buf = StringIO()
+    Console(file=buf, width=160, color_system=None, force_terminal=False).print(t)
+    return "\n".join(line.rstrip() for line in buf.getvalue().rstrip().splitlines())
+
+
 def run_baselines_cli(args):
+    """``sslpv-harness baselines ACTION``: ``(result, text)``; see :mod:`harness.cli.baselines`."""
+    scenes = None if args.scenes is None else [n.strip() for n in args.scenes.split(",")]
     if args.action == "update":
-        res = update(args.store, scene=args.scene, yes=True)
+        res = update(args.store, scene=scenes, yes=True)
         return res, format_changes(res["changes"])
     if args.action == "show":
-        names = [args.scene] if args.scene else [p.stem for p in sorted(BASELINE_DIR.glob("*.json"))]
-        return {n: read_baseline(n) for n in names}, None
-    names = [args.scene] if args.scene else list_scenes()
+        if args.store is not None:               # what `update --store` would change, nothing written
+            res = update(args.store, scene=scenes, yes=False)
+            return {"store": str(args.store), "changes": res["changes"]}, format_changes(res["changes"])
+        known = [p.stem for p in sorted(BASELINE_DIR.glob("*.json"))]
+        names = known if scenes is None else _scene_names(args.scenes, known)
+        entries = {n: read_baseline(n) for n in names}
+        return entries, show_table(entries)
+    from harness.runs.sweep import resolve_scenes
+
+    names = resolve_scenes(args.scenes) if args.scenes else list_scenes()
     if args.into and len(names) != 1:
-        raise InputError("--into", "into", "needs exactly one --scene", "add --scene NAME")
+        raise InputError("--into", "into", f"needs exactly one scene, got {len(names)}", "add --scenes NAME")
     from harness.runs.references import _client
 
     # On a LocalCluster by default (--scheduler: an existing one; --serial: in this process).
     client, cluster, threads = _client(args.scheduler, args.workers, args.serial)
     try:
         out = [regenerate_reference(n, into=args.into, client=client, threads=threads,
-                                    progress=not getattr(args, "json", False)) for n in names]
+                                    progress=args.progress and not args.json) for n in names]
     finally:
         if client is not None:
             client.close()

@@ -372,4 +372,5 @@ def run_nightly_cli(args):
     size = getattr(args, "size", None)
     size = "own" if size is not None and size.strip().lower() == "own" else parse_size(size)
     return run_nightly(args.matrix, args.store, args.out, night=args.date, scheduler=args.scheduler,
-                       methods=getattr(args, "method", None), size=size, cache=not getattr(args, "no_cache", False))
+                       workers=args.workers, progress=args.progress, methods=getattr(args, "method", None),
+                       size=size, cache=not getattr(args, "no_cache", False))

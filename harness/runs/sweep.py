@@ -92,7 +92,7 @@ from harness.validation import INPUT_CONFIG, MAX_IMAGE_SIZE, SweepSize, read_jso
 
 from harness.reference.committed import sized_scene
 from harness.runs.cache import SweepCache, open_cache, workers_gl_renderer
-from harness.scene import list_scenes, load_scene, scene_path
+from harness.scene import list_scenes, load_scene, scene_path, unknown_scene_fix
 
 
 def expand_all(params):
@@ -193,7 +193,7 @@ def resolve_scenes(spec, where="--scenes", field="scenes"):
     for i, n in enumerate(names):
         if not scene_path(n).is_file():
             raise InputError(where, f"{field}[{i}]" if listed and where != "--scenes" else field,
-                             f"unknown scene {n!r}", f"choose from: {', '.join(known)}")
+                             f"unknown scene {n!r}", unknown_scene_fix(n, known))
     return names
 
 
@@ -819,7 +819,7 @@ def _resume_or_start(store, cfg, out):
 def run_sweep_cli(args):
     """``sslpv-harness sweep``: progress on stderr (``harness.progress``), the summary on stdout."""
     cfg = config_from_args(args)
-    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
+    return run_sweep(cfg, scheduler=args.scheduler, workers=args.workers, progress=args.progress,
                      cache=not getattr(args, "no_cache", False))
 
 

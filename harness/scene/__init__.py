@@ -25,9 +25,10 @@ from harness.scene.load import (
     load_scene,
     scene_hash,
     scene_path,
+    unknown_scene_fix,
 )
 
 __all__ = [
     "BOUNDARY_KINDS", "SUITE_DIR", "Boundary", "Camera", "Medium", "PointLight", "Scene",
-    "list_scenes", "load_scene", "scene_hash", "scene_path", "SceneFile", "json_schema",
+    "list_scenes", "load_scene", "scene_hash", "scene_path", "unknown_scene_fix", "SceneFile", "json_schema",
 ]

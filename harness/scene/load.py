@@ -144,12 +144,22 @@ def list_scenes(suite_dir=SUITE_DIR):
     return sorted(p.parent.name for p in Path(suite_dir).glob("*/scene.toml"))
 
 
+def unknown_scene_fix(name, known=None):
+    """The fix of an unknown scene's message: the closest suite names first (``difflib``), then the suite."""
+    import difflib
+
+    known = list_scenes() if known is None else list(known)
+    close = difflib.get_close_matches(Path(str(name)).name, known, n=2, cutoff=0.6)
+    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    return hint + (f"the suite's scenes: {', '.join(known)}" if known else "the suite has no scenes")
+
+
 def load_scene(name_or_path):
     """Read and validate a scene; see the module docstring."""
     path = scene_path(name_or_path)
     known = ", ".join(list_scenes()) or "none"
     if not path.exists():
-        raise InputError(path, "scene", f"no scene file {path}", f"choose one of the suite's scenes: {known}")
+        raise InputError(path, "scene", "no such scene file", unknown_scene_fix(name_or_path))
     data = read_toml(path, "a scene.toml", f"give a scene folder or one of the suite's scenes: {known}")
     spec = validate(SceneFile, data, path, context={"scene_dir": path.parent})
     return scene_from_model(spec, path)

@@ -20,6 +20,8 @@ EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "s
 def export(store, path, run_id=None, scene=None):
     """Write :meth:`Store.results <harness.store.store.Store.results>` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
 
+    ``scene`` (a name, or a list of names, each of which must have configurations) keeps only their rows.
+
     Dicts and lists become JSON text columns (``params_json``,
     ``per_channel_json``, ``metric_params_json``, ``diagnostics_json``,
     ``calibration_json``, ``shared_json``) and each parameter also
@@ -35,12 +37,14 @@ def export(store, path, run_id=None, scene=None):
     check_writable(path, "--out")
     if run_id is not None:
         store.run(run_id)                        # an unknown id is refused, as `report --run` refuses it
-    if scene is not None:
+    wanted = [scene] if isinstance(scene, str) else scene
+    if wanted is not None:
         scenes = store.scenes(run_id)
-        if scene not in scenes:
-            within = f" of run {run_id}" if run_id is not None else ""
-            raise InputError(store.path, "scene", f"no configuration{within} is of scene {scene!r}",
-                             f"pick one of: {', '.join(scenes)}" if scenes else "the store has no configurations")
+        for name in wanted:
+            if name not in scenes:
+                within = f" of run {run_id}" if run_id is not None else ""
+                raise InputError(store.path, "scene", f"no configuration{within} is of scene {name!r}",
+                                 f"pick one of: {', '.join(scenes)}" if scenes else "the store has no configurations")
     if fmt == ".parquet":
         try:
             import pyarrow as pa
@@ -48,7 +52,7 @@ def export(store, path, run_id=None, scene=None):
         except ImportError:
             raise InputError(path, "format", "writing Parquet needs pyarrow, which is not installed",
                              "install pyarrow (pip install pyarrow) or export to .csv") from None
-    rows = store.results(run_id, scene)
+    rows = store.results(run_id) if wanted is None else [r for n in wanted for r in store.results(run_id, n)]
     pnames = sorted({k for r in rows for k in r["params"]})
     flat = []
     for r in rows:

@@ -376,7 +376,7 @@ MUTATIONS = (
              ("tests/test_result_cache.py::test_corrupt_and_foreign_entries_are_rendered_again",),
              "result cache: an entry's images served without checking them against their recorded hash"),
     Mutation("reference_json_silences_progress", "metric", "harness/cli/reference.py",
-             "progress=not args.no_progress)", "progress=not (args.no_progress or args.json))",
+             "progress=args.progress)", "progress=args.progress and not args.json)",
              ("tests/test_progress.py::test_json_never_silences_progress",),
              "reference --json: progress on stderr turned off by --json"),
     # ------------------------------------------------------------------ the rivals' chunks and spot check
@@ -472,4 +472,15 @@ MUTATIONS = (
              "for ell in range(lmax + 1):", "for ell in range(1):",
              ("tests/test_diffusion_bounded.py::TestSphereLitFromOneSide::test_source_one_mean_free_path_below_the_pole",),
              "the one-sided sphere's series (Eq. (D2')) cut to its monopole: the far hemisphere gets half the escape"),
+    # ------------------------------------------------------------------ the command line
+    Mutation("cli_option_without_help", "cli", "harness/cli/reference.py",
+             'sp.add_argument("--force", action="store_true", help="re-render even if a cached reference exists")',
+             'sp.add_argument("--force", action="store_true")',
+             ("tests/test_cli_help.py::test_every_option_has_help",),
+             "an option of `reference` loses its help text"),
+    Mutation("cli_workers_default_unstated", "cli", "harness/cli/options.py",
+             'help=f"{SHARED[\'--workers\']}, an integer > 0 (default: the CPU cores)")',
+             'help=f"{SHARED[\'--workers\']}, an integer > 0")',
+             ("tests/test_cli_help.py::test_every_default_is_shown",),
+             "--workers no longer says what it is when left out, on every command that takes it"),
 )

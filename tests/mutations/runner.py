@@ -49,7 +49,7 @@ class Mutation:
     """One exact edit and the tests that must fail with it."""
 
     name: str                 # unique, snake_case
-    kind: str                 # glsl | physics | mitsuba | mapping | metric | scene | camera
+    kind: str                 # glsl | physics | mitsuba | mapping | metric | scene | camera | cli
     path: str                 # file relative to the repository root
     old: str                  # exact text, found exactly once in the file
     new: str                  # what replaces it
