@@ -127,7 +127,7 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     """
     from harness.io.atomic import atomic_dir
     from harness.io.outputs import check_replaceable, check_writable
-    from harness.reference import render as _render
+    from harness.reference import plan as _plan
     from harness.reference.cache import read_reference_meta, reference_for
     from harness.reference.committed import sized_scene
     from harness.reference.render import check_max_seconds
@@ -155,7 +155,7 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     kwargs = {"spp": spp, "variant": variant, "target_rel_se": target, "max_seconds": max_seconds}
     client, cluster, threads = _client(scheduler, workers, serial)
     try:
-        before = _render.RENDER_COUNT
+        before = _plan.RENDER_COUNT
         folder = reference_for(scene, force=force, client=client, threads=threads, progress=progress, **kwargs)
     finally:
         if client is not None:
@@ -164,7 +164,7 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
             cluster.close()
     meta = read_reference_meta(folder)
     result = {"scene": scene.name, "content_hash": scene.content_hash, "reference_dir": str(folder),
-              "rendered": _render.RENDER_COUNT != before, "out_dir": None, "files": meta["files"],
+              "rendered": _plan.RENDER_COUNT != before, "out_dir": None, "files": meta["files"],
               "median_rel_se_subsurface": meta.get("median_rel_se_subsurface"),
               "median_rel_se_full": meta.get("median_rel_se_full"), "target_rel_se": meta.get("target_rel_se"),
               "target_met": meta.get("target_met"), "capped_by": meta.get("capped_by"),
