@@ -447,7 +447,7 @@ MUTATIONS = (
              "a = a * (1.0 - _shift_from(emp, offset) * emp)", "a = a * (1.0 - emp)",
              ("tests/test_outside_interior.py::TestTwin",),
              "outside = interior in the twin: every transfer into an empty cell cut, not only empty -> empty"),
-    Mutation("steady_interior_ignored", "physics", "sslpv_gl/steady.py",
+    Mutation("steady_interior_ignored", "physics", "sslpv_gl/transfer.py",
              "a = a * (1.0 - emp[src] * emp[dst])", "a = a * 1.0",
              ("tests/test_outside_interior.py::TestTwin",),
              "outside = interior ignored by the steady solver's operator"),
