@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sslpv_gl import lattice  # noqa: E402
+from sslpv_gl import diffusion, lattice  # noqa: E402
 
 DIRECTIONS = {"axis": (1, 0, 0), "face diag": (1, 1, 0), "body diag": (1, 1, 1)}
 
@@ -47,7 +47,7 @@ def green_ratios(kappa, k1, N):
     """
     sigma_a = kappa * kappa / 3.0                       # sigma_tr^2 = 3 sigma_a sigma_t'
     sigma_t, albedo = 1.0, 1.0 - sigma_a                # sigma_t' = sigma_t (g = 0) = 1
-    m = lattice.diffusion_mapping(sigma_t, albedo, 0.0, 1.0, k1)
+    m = diffusion.diffusion_mapping(sigma_t, albedo, 0.0, 1.0, k1)
     c = np.zeros((N, N, N, 4))
     c[0, 0, 0, 0] = 1.0                                  # s = 1, P = sqrt(4 pi)
     U = lattice.periodic_steady_state(c, k1, float(m["sigma_lpv"]))[..., 0]

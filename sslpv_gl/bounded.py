@@ -55,14 +55,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from . import boundary, lattice
+from . import boundary, diffusion
 from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
 
 __all__ = ["slab_diffusion", "sphere_diffusion", "sphere_side_diffusion", "slab_operator", "slab_lattice", "sphere_lattice"]
 
 
 def _coefficients(sigma_t, albedo, g):
-    sigma_a, sigma_tp, sigma_tr = lattice.diffusion_coefficients(sigma_t, albedo, g)
+    sigma_a, sigma_tp, sigma_tr = diffusion.diffusion_coefficients(sigma_t, albedo, g)
     return float(sigma_a), float(sigma_tp), float(sigma_tr), 1.0 / (3.0 * float(sigma_tp))
 
 
@@ -168,7 +168,7 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     inside[..., pad:pad + int(N)] = True
     keep, emit = boundary.outside_masks(inside, outside, np.full(3, zb / dx))
     keep, emit = keep[0, 0, :, 0], emit[0, 0, :, 0]
-    m = lattice.diffusion_mapping(sigma_t, albedo, g, dx)
+    m = diffusion.diffusion_mapping(sigma_t, albedo, g, dx)
     sig = np.where(keep > 0, float(m["sigma_lpv"]), 0.0)
     k1 = scatter_factors(np.where(keep > 0, 1.0, 0.0), float(m["g"]))[..., 1]
     P = slab_operator(sig, k1, emit, dx)
@@ -229,7 +229,7 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
     r = np.sqrt(idx[:, None, None] ** 2 + idx[None, :, None] ** 2 + idx[None, None, :] ** 2) * dx
     inside = r < a
     keep, emit = boundary.outside_masks(inside, "extrapolated", zb / dx)
-    m = lattice.diffusion_mapping(st, al, gg, dx)
+    m = diffusion.diffusion_mapping(st, al, gg, dx)
     sig = np.where(keep > 0, m["sigma_lpv"], 0.0)
     spr = np.where(keep > 0, 1.0, 0.0)
     c0 = np.zeros((n, n, n, 3, 4))

@@ -63,7 +63,7 @@ Mappings
     ``dx -> 0``: ``sigma_lpv -> sigma_a`` and ``sigma_s' -> sigma_s dx``.
 ``diffusion``
     Matches diffusion theory (``docs/diffusion_mapping.md``, Eq. (14)-(21);
-    :func:`sslpv_gl.lattice.diffusion_mapping`): with ``sigma_tr =
+    :func:`sslpv_gl.diffusion.diffusion_mapping`): with ``sigma_tr =
     sqrt(3 sigma_a sigma_t')``, ``sigma_t' = sigma_a + sigma_s (1 - g)``,
     ``sigma_lpv = ln(1 + D_lpv (sigma_tr dx)^2) / dx`` makes the lattice's
     steady-state diffusion length ``1 / sigma_tr`` at every ``dx``
@@ -102,7 +102,7 @@ import numpy as np
 
 from harness.errors import InputError
 
-from . import boundary, lattice
+from . import boundary, diffusion
 
 __all__ = [
     "MAPPINGS",
@@ -211,7 +211,7 @@ def _collision(sigma_t, albedo, dx):
 def _diffusion(sigma_t, albedo, dx, g=0.0):
     # Eq. (16)-(17) of docs/diffusion_mapping.md; Eq. 3's k1 needs the lattice g
     # that map_material_full returns (sigma_s' = 1, g = k1)
-    m = lattice.diffusion_mapping(sigma_t, albedo, g, dx)
+    m = diffusion.diffusion_mapping(sigma_t, albedo, g, dx)
     return m["sigma_lpv"], m["sigma_s_prime"]
 
 
@@ -243,7 +243,7 @@ def map_material_full(sigma_t, albedo, g, dx, mapping="collision"):
     """
     _check_choice(mapping, MAPPINGS, "mapping")
     if mapping == "diffusion":
-        m = lattice.diffusion_mapping(sigma_t, albedo, g, float(dx))
+        m = diffusion.diffusion_mapping(sigma_t, albedo, g, float(dx))
         return {k: m[k] for k in ("sigma_lpv", "sigma_s_prime", "g", "radiance_scale")}
     sigma_lpv, sp = MAPPINGS[mapping](sigma_t, albedo, float(dx))
     shape = np.broadcast(np.asarray(sigma_lpv), np.asarray(sp), np.asarray(g)).shape

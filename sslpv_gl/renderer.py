@@ -44,7 +44,10 @@ mesh, the grids and the render targets, and runs the stages in order:
 The LPV grid textures are :class:`sslpv_gl.grids.GridSet` (one per ``N`` and
 precision); the framebuffers of the raster passes are
 :class:`sslpv_gl.targets.Targets`. Parameters are
-:class:`sslpv_gl.params.SSLPVParams` (defaults in one place).
+:class:`sslpv_gl.params.SSLPVParams` (defaults in one place). One propagation shaded
+at its step counts (snapshots, ``steps = auto``, ``steps = steady``) is
+:func:`sslpv_gl.steps.propagate_and_shade`; the stage timers are :mod:`sslpv_gl.timing`,
+the light's whereabouts :mod:`sslpv_gl.diagnostics`.
 
 Limits
 ------
@@ -56,7 +59,6 @@ Limits
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import time
 from dataclasses import dataclass, field
@@ -70,15 +72,16 @@ from . import inject as injection
 from . import propagate as propagation
 from . import rsm
 from . import shade as shading
-from .grids import LOCAL_SIZE, GridSet, band0, read_c00, read_grid, read_layers, support, write_grid, write_layers
+from .diagnostics import _flux
+from .grids import LOCAL_SIZE, GridSet, band0, read_grid, read_layers, support, write_grid, write_layers
 from .material import lpv_material, resample_medium
 from .params import STEP_MODES, SSLPVParams
 from .shade import MAX_LIGHTS
+from .steps import propagate_and_shade
 from .targets import Targets
+from .timing import _gpu_ms, stage_timer
 
 __all__ = ["SSLPVRenderer", "RenderResult", "MAX_LIGHTS", "LOCAL_SIZE"]
-
-_QUERY_INVALID = 0xFFFFFFFF      # what llvmpipe returns for an unavailable time query
 
 #: program key[0] -> the stage's builder, called as ``builder(ctx, *key[1:], warnings)``
 _BUILDERS = {
@@ -89,24 +92,6 @@ _BUILDERS = {
     "shade": shading.build_program,             # ("shade", lookup)
     "scale": propagation.build_scale_program,   # ("scale", precision)
 }
-
-
-def _gpu_ms(query_ns, wall_ns, stage, warnings):
-    """GL time of one stage in ms.
-
-    moderngl reads GL_TIME_ELAPSED as an unsigned 32-bit value, which saturates at
-    0xFFFFFFFF ns (4.29 s; llvmpipe also answers that for a query it could not time).
-    A saturated query of a stage whose host time (between two ``finish`` calls)
-    exceeds 4.29 s is replaced by that host time, with a warning; otherwise NaN.
-    """
-    if query_ns < _QUERY_INVALID:
-        return query_ns / 1e6
-    if wall_ns >= _QUERY_INVALID:
-        warnings.append(f"GL timer query for '{stage}' saturated at 4.29 s; the host time between glFinish "
-                        "calls is reported instead")
-        return wall_ns / 1e6
-    warnings.append(f"GL timer query for '{stage}' returned no valid value ({query_ns} ns)")
-    return float("nan")
 
 
 @dataclass
@@ -355,19 +340,14 @@ class SSLPVRenderer:
         return self._render(scene, params, ks, diagnostics)
 
     def _render(self, scene, params, steps_list, diagnostics):
+        """RSM and injection once (Sec. 3.1); then, per group of step counts that share a material, one
+        propagation (Sec. 3.2) shaded at each count (Sec. 3.3) -> :class:`RenderResult` s, counts ascending."""
         self._check_scene(scene)
         ctx = self.ctx
         t_wall = time.perf_counter()
         warnings = []
         mode = params.steps if params.steps in STEP_MODES else None
-        # What each step count renders with: a calibrated mapping has its own sigma_scale and
-        # radiance_scale per budget (Resolved). Counts that share the mapping family and
-        # sigma_scale share one propagation; the radiance scale acts after it (grid.scale).
-        resolved = {k: params.replace(steps=k).resolved() for k in sorted(set(steps_list))} if mode is None \
-            else {params.steps: params.resolved()}
-        groups = {}
-        for k, res in resolved.items():
-            groups.setdefault((res.family, res.sigma_scale), []).append(k)
+        resolved, groups = _budgets(params, steps_list, mode)
         views, centre, radius, w = rsm.light_views(scene)
         warnings += w
         grid = self._grid(params.N, params.precision)
@@ -375,49 +355,40 @@ class SSLPVRenderer:
         dx = float((np.asarray(med.bbox_max, float) - np.asarray(med.bbox_min, float))[0] / params.N)
         queries = {k: ctx.query(time=True) for k in ("rsm", "injection")}
         stage_wall = {}
+        stage = stage_timer(ctx, queries, stage_wall)
 
-        @contextlib.contextmanager
-        def stage(name, query=None):
-            # A host clock around each stage (after a finish) beside the GL timer query:
-            # moderngl reads GL_TIME_ELAPSED as 32 bits, which wraps after 4.29 s.
-            ctx.finish()
-            t = time.perf_counter_ns()
-            with (query if query is not None else queries[name]):
-                yield
-            ctx.finish()
-            stage_wall[name] = stage_wall.get(name, 0) + time.perf_counter_ns() - t
+        shadow_tex = self._rsm_and_inject(scene, params, views, grid, stage)
+        shared = {k: _gpu_ms(queries[k].elapsed, stage_wall[k], k, warnings) for k in ("rsm", "injection")}
 
+        want_diag = diagnostics or mode is not None
+        c0, layers, inj, bounds = _read_injected(grid, params.precision, mode, want_diag)
+        outputs = []
+        for i, ks in enumerate(groups.values()):
+            if i:                                          # the propagation overwrote the injected grid
+                write_layers(grid.prop_a, layers)
+            outputs += propagate_and_shade(self, scene, params, ks, resolved, grid, dx, c0, bounds, inj, want_diag,
+                                           (views, shadow_tex, centre, radius), shared, stage, stage_wall, warnings)
+        outputs.sort(key=lambda o: -1 if o[2] is None else o[2])
+        return self._results(outputs, len(groups), t_wall, warnings)
+
+    def _rsm_and_inject(self, scene, params, views, grid, stage):
+        """Stages 1 and 2, each timed by ``stage``: every light's RSM and shadow map, then the injection of
+        their texels into ``grid.prop_a``. Returns the shadow maps (the shading pass reads them)."""
         with stage("rsm"):
             maps, shadow_tex = self._render_rsm(scene, params, views)
         with stage("injection"):
             size = params.inject_size
             sources = [(texs, size * size, light.position) for texs, light in zip(maps, scene.lights)]
             self._inject(grid, sources, scene, params.inject_offset)
-        shared = {k: _gpu_ms(queries[k].elapsed, stage_wall[k], k, warnings) for k in ("rsm", "injection")}
+        return shadow_tex
 
-        want_diag = diagnostics or mode is not None
-        # Outside the stage timers. The steady solve needs the whole injected grid; the
-        # diagnostics and the convergence check only its band-0 coefficient (read_c00).
-        c0 = read_grid(grid.prop_a, params.precision) if mode == "steady" else None
-        # Where the injected light is (propagate.region) comes from the same readback: it spares
-        # each step the cells light cannot reach yet; a second propagation restores the grid from it.
-        layers = read_layers(grid.prop_a, params.precision) if want_diag or mode != "steady" else None
-        inj = _flux(band0(layers)) if want_diag else None
-        bounds = support(layers) if mode != "steady" else None
-        outputs = []
-        for i, ks in enumerate(groups.values()):
-            if i:                                          # the propagation overwrote the injected grid
-                write_layers(grid.prop_a, layers)
-            outputs += self._propagate_and_shade(scene, params, ks, resolved, grid, dx, c0, bounds, inj, want_diag,
-                                                 (views, shadow_tex, centre, radius), shared, stage, stage_wall,
-                                                 warnings)
-        outputs.sort(key=lambda o: -1 if o[2] is None else o[2])
-
+    def _results(self, outputs, n_groups, t_wall, warnings):
+        """The :class:`RenderResult` of each shaded output ``(buffers, timings, steps_used, diagnostics, resolved)``."""
         results = []
         for bufs, timings, steps_used, diag, res in outputs:
             timings["wall"] = (time.perf_counter() - t_wall) * 1e3
             if len(outputs) > 1:
-                timings["shared"] = ["rsm", "injection", "host_material"] if len(groups) == 1 else ["rsm", "injection"]
+                timings["shared"] = ["rsm", "injection", "host_material"] if n_groups == 1 else ["rsm", "injection"]
             mask = bufs[1][..., 3] > 0.5
             results.append(RenderResult(
                 full=np.ascontiguousarray(bufs[0][..., :3]),
@@ -434,116 +405,37 @@ class SSLPVRenderer:
             ))
         return results
 
-    def _propagate_and_shade(self, scene, params, ks, resolved, grid, dx, c0, bounds, inj, want_diag, light,
-                             shared, stage, stage_wall, warnings):
-        """One propagation from the injected ``grid.prop_a`` with the material of ``ks`` (step counts that share
-        ``resolved[k]``'s family and sigma_scale), shaded at each count with its own radiance scale.
-
-        Returns ``[(buffers, timings, steps_used, diagnostics, resolved), ...]`` in the order shaded.
-        """
-        ctx = self.ctx
-        views, shadow_tex, centre, radius = light
-        mode = params.steps if params.steps in STEP_MODES else None
-        t0 = time.perf_counter()
-        first = params.replace(steps=ks[0]) if mode is None else params
-        material = self.lpv_material(scene, first)
-        scaled = propagation.upload_material(grid, _with_global_scale(material, resolved[ks[0]].radiance_scale), dx)
-        uploaded = resolved[ks[0]].radiance_scale
-        host_ms = (time.perf_counter() - t0) * 1e3
-        outside_mask = ~np.asarray(material["inside"], dtype=bool) if want_diag else None
-        prop_ms = 0.0                                     # GL time of the propagation so far
-        outputs = []
-
-        def shade_now(steps_used, final):
-            nonlocal scaled, uploaded
-            res = resolved[steps_used if mode is None else params.steps]
-            if res.radiance_scale != uploaded:            # a budget of this group with its own radiance scale
-                scaled = propagation.upload_scale(grid, _with_global_scale(material, res.radiance_scale))
-                uploaded = res.radiance_scale
-            q = ctx.query(time=True)
-            with stage("shading", q):
-                acc = self._scale(grid) if scaled else None
-                target = self._shade(scene, params, grid, views, shadow_tex, centre, radius, acc)
-            bufs = shading.read_images(target, scene.camera.width, scene.camera.height)  # outside the timers
-            timings = dict(shared)
-            timings["propagation"] = prop_ms
-            timings["shading"] = _gpu_ms(q.elapsed, stage_wall.pop("shading"), "shading", warnings)
-            timings["host_material"] = host_ms
-            diag = None
-            if want_diag:
-                diag = _diagnostics(inj, None if final is None else read_c00(final, params.precision),
-                                    read_c00(grid.accum, params.precision), outside_mask, steps_used)
-            outputs.append((bufs, timings, steps_used, diag, res))
-
-        if mode == "steady":
-            t = time.perf_counter_ns()
-            from .steady import steady_state
-
-            acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
-                                     skip=params.skip, emit=material["emit"], empty=material.get("empty"))
-            write_grid(grid.accum, acc, params.precision)
-            ctx.finish()
-            prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost
-            warnings.append(f"steps=steady: accumulation solved on the host ({info.get('method', 'krylov')}, "
-                            f"{info.get('iterations')} iterations); its propagation time is host wall time")
-            shade_now(None, None)
-            return outputs
-
-        targets = sorted(ks) if mode is None else []
-        last = targets[-1] if targets else params.max_steps
-        if targets and targets[0] <= params.skip:
-            propagation.clear(grid.accum, grid)        # a snapshot before the first accumulated step
-        check_every = 8
-        injected = inj if mode == "auto" else None
-        seg = {"q": None, "t": 0}                      # the running propagation segment
-
-        def begin():
-            ctx.finish()
-            seg["q"] = ctx.query(time=True)
-            seg["t"] = time.perf_counter_ns()
-            seg["q"].__enter__()
-
-        def end():
-            nonlocal prop_ms
-            seg["q"].__exit__(None, None, None)
-            ctx.finish()
-            prop_ms += _gpu_ms(seg["q"].elapsed, time.perf_counter_ns() - seg["t"], "propagation", warnings)
-
-        def on_step(step, src):
-            if mode == "auto":
-                if step % check_every and step != last:
-                    return False
-                end()                                  # the convergence check is not propagation work
-                done = step == last or _flux(read_c00(src, params.precision)).max() < \
-                    params.converge_tol * max(float(injected.max()), 1e-300)
-                if done:
-                    shade_now(step, src)
-                    if step == last:
-                        warnings.append(f"steps=auto: not converged after max_steps={last}")
-                    return True
-                begin()
-                return False
-            if step in targets:
-                end()
-                shade_now(step, src)
-                if step == last:
-                    return True
-                begin()
-            return False
-
-        begin()
-        if last == 0 or (targets and targets[0] == 0):
-            end()
-            shade_now(0, grid.prop_a)
-            if last > 0:
-                begin()
-        if last > 0:
-            self._propagate(grid, last, params.skip, on_step, bounds)
-        return outputs
-
     def _scale(self, grid):
         prog = self._program(("scale", grid.precision))
         return propagation.scale_accumulation(self.ctx, prog, grid)
+
+
+def _budgets(params, steps_list, mode):
+    """``(resolved, groups)``: each step count's resolved parameters, and the counts grouped by what one
+    propagation can serve."""
+    # What each step count renders with: a calibrated mapping has its own sigma_scale and
+    # radiance_scale per budget (Resolved). Counts that share the mapping family and
+    # sigma_scale share one propagation; the radiance scale acts after it (grid.scale).
+    resolved = {k: params.replace(steps=k).resolved() for k in sorted(set(steps_list))} if mode is None \
+        else {params.steps: params.resolved()}
+    groups = {}
+    for k, res in resolved.items():
+        groups.setdefault((res.family, res.sigma_scale), []).append(k)
+    return resolved, groups
+
+
+def _read_injected(grid, precision, mode, want_diag):
+    """``(c0, layers, injected flux, bounds)``: what the later stages read back of the injected grid, outside
+    the stage timers (None where the mode does not need it)."""
+    # The steady solve needs the whole injected grid; the
+    # diagnostics and the convergence check only its band-0 coefficient (read_c00).
+    c0 = read_grid(grid.prop_a, precision) if mode == "steady" else None
+    # Where the injected light is (propagate.region) comes from the same readback: it spares
+    # each step the cells light cannot reach yet; a second propagation restores the grid from it.
+    layers = read_layers(grid.prop_a, precision) if want_diag or mode != "steady" else None
+    inj = _flux(band0(layers)) if want_diag else None
+    bounds = support(layers) if mode != "steady" else None
+    return c0, layers, inj, bounds
 
 
 def _put(cache, key, value, size):
@@ -551,37 +443,3 @@ def _put(cache, key, value, size):
     if len(cache) >= size:
         cache.pop(next(iter(cache)))
     cache[key] = value
-
-
-def _with_global_scale(material, r):
-    """The material with the resolved global radiance scale ``r`` folded into its per-cell one."""
-    if r == 1.0:
-        return material
-    out = dict(material)
-    out["radiance_scale"] = np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64) * r
-    return out
-
-
-def _flux(c00):
-    """Total flux per colour of an SH grid's band-0 coefficients ``(..., 3)``: ``sum sqrt(4 pi) |c00|``.
-
-    abs: a lattice grid may dip below 0.
-    """
-    return np.sqrt(4.0 * np.pi) * np.abs(np.asarray(c00)).reshape(-1, 3).sum(axis=0, dtype=np.float64)
-
-
-def _diagnostics(inj, final, accum, outside_mask, steps_used):
-    """Where the light is: injected flux, what is still propagating, and the accumulated share outside the mesh.
-
-    ``inj`` is the injected flux per colour (:func:`_flux` of the injected grid, once per render);
-    ``final`` and ``accum`` are band-0 coefficients ``(N, N, N, 3)`` (:func:`read_c00`) of the last
-    propagation and the accumulation grid; ``outside_mask`` is True for the cells outside the mesh.
-    """
-    acc = np.abs(np.asarray(accum))                                     # (N, N, N, 3), sums in float64
-    total = acc.reshape(-1, 3).sum(axis=0, dtype=np.float64)
-    outside = acc[outside_mask].sum(axis=0, dtype=np.float64)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        remaining = None if final is None else float(np.max(np.where(inj > 0, _flux(final) / inj, 0.0)))
-        share = float(np.sum(outside) / np.sum(total)) if np.sum(total) > 0 else 0.0
-    return {"steps_used": steps_used, "injected_flux": inj.tolist(), "remaining_fraction": remaining,
-            "outside_share": share}

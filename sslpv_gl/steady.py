@@ -12,19 +12,12 @@ Sec. 3.2) is the Neumann series::
 
     accum_inf = sum_{k>skip} P^k c0 = (I - P)^{-1} P^{skip+1} c0         (S2)
 
-which exists when the spectral radius ``rho(P) < 1``. This module builds
-``P`` as a sparse matrix, solves (S2) with a Krylov method, and offers the
-iterated alternative that stops when the light is gone.
+which exists when the spectral radius ``rho(P) < 1``. This module solves (S2)
+with a Krylov method, and offers the iterated alternative that stops when the
+light is gone.
 
-The transfer rule is the one of ``docs/conventions.md`` (and of
-:func:`sslpv_gl.twin.propagate`); for a destination ``d`` and its six
-neighbours ``s``::
-
-    c_d += M_s @ (exp(-0.5 (sigma_lpv[s] + sigma_lpv[d]) dx_axis) * S(s) c_s)
-
-``S(s) = diag(1, k1, k1, k1)``, ``k1 = (1 - sp[s]) + sp[s] g[s]`` (Eq. 3 on
-the SOURCE cell), ``M_s`` = :func:`sslpv_gl.sh.propagation_matrices` (Sec. 4),
-nothing enters from outside the grid. Colours are independent.
+``P`` itself, its ordering and its spectral radius are :mod:`sslpv_gl.transfer`; the
+transfer rule is the one of ``docs/conventions.md`` (and of :func:`sslpv_gl.twin.propagate`).
 
 Functions
 ---------
@@ -102,14 +95,6 @@ Parameters
    * - ``max_steps`` (``propagate_until``)
      - ``4096``
      - cap on ``K``, integer >= ``skip``
-
-Ordering of the operator
-------------------------
-Per colour, the unknown for cell ``[z, y, x]`` and coefficient ``a`` is row
-``4 * ((z * N + y) * N + x) + a``, i.e. ``grid[..., colour, :].reshape(-1)``
-of a C-ordered ``(N, N, N, 3, 4)`` grid. ``P[4d + a, 4s + b] = M_s[a, b] *
-exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
-
 Solver
 ------
 ``P`` couples only face neighbours, whose parities ``(x + y + z) % 2``
@@ -165,9 +150,7 @@ accuracy there, and the default ``1e-3`` somewhat less.
 
 Limits
 ------
-* Memory: ``P`` has 36 stored entries per cell and colour (9.4 M at
-  ``N = 64``, ~110 MB per colour in CSR); ``N = 128`` needs ~0.9 GB per
-  colour and was not measured.
+* Memory: that of ``P`` (:mod:`sslpv_gl.transfer`).
 * Float64 throughout (the GL renderer stores fp32/fp16).
 * ``propagate_until`` applies ``P`` step by step with the sparse operator
   (same rule as the twin to ~1e-16 per step, faster); its cost is the
@@ -181,10 +164,9 @@ import numbers
 import time
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .sh import SOURCE_OFFSETS, neighbour_slices, propagation_matrices, scatter_factors
+from .transfer import _bad, _c0, _material, _red_black, _skip, _Split, spectral_radius, transfer_operator
 
 __all__ = [
     "transfer_operator",
@@ -198,230 +180,6 @@ _METHODS = ("bicgstab", "gmres")
 # scipy < 1.12 calls the relative tolerance `tol` (the project allows scipy >= 1.11)
 _RTOL = "rtol" if "rtol" in inspect.signature(spla.bicgstab).parameters else "tol"
 _GMRES_RESTART = 50
-_DENSE_EIG_MAX = 512           # reduced systems up to this size use dense eigvals
-_DROP = 1e-12                  # relative size below which matrix entries are quadrature noise
-
-
-# ------------------------------------------------------------------ inputs
-
-def _bad(field, problem, fix):
-    # one line: "<setting>: <field>: <problem>; <fix>" (docs/conventions.md)
-    raise ValueError(f"sslpv_gl.steady: {field}: {problem}; {fix}")
-
-
-def _finite(name, a):
-    if not np.all(np.isfinite(a)):
-        _bad(name, "contains NaN or Inf", "pass finite values")
-    return a
-
-
-def _material(sigma_lpv, sigma_s_prime, g, N):
-    shape = (N, N, N, 3)
-    out = []
-    for name, a in (("sigma_lpv", sigma_lpv), ("sigma_s_prime", sigma_s_prime), ("g", g)):
-        a = np.asarray(a, dtype=np.float64)
-        try:
-            a = np.broadcast_to(a, shape)
-        except ValueError:
-            _bad(name, f"shape {a.shape} does not broadcast to {shape}", "pass (N, N, N, 3) or a scalar")
-        out.append(_finite(name, a))
-    return out
-
-
-def _grid_size(*arrays):
-    """N from the first material array with at least 3 dimensions."""
-    for a in arrays:
-        a = np.asarray(a)
-        if a.ndim >= 3:
-            if not a.shape[0] == a.shape[1] == a.shape[2] >= 1:
-                _bad("sigma_lpv", f"shape {a.shape} is not (N, N, N, ...)", "pass a cubic grid")
-            return int(a.shape[0])
-    _bad("sigma_lpv", "no material array has a grid shape", "pass (N, N, N, 3) arrays")
-
-
-def _dx(dx):
-    d = np.asarray(dx, dtype=np.float64)
-    try:
-        d = np.broadcast_to(d, (3,)).copy()
-    except ValueError:
-        _bad("dx", f"shape {d.shape} is not scalar or (3,)", "pass the cell width or (dx, dy, dz)")
-    if not np.all(np.isfinite(d)) or np.any(d <= 0):
-        _bad("dx", f"must be finite and > 0, got {dx!r}", "pass the cell width")
-    return d
-
-
-def _c0(c0):
-    c = np.asarray(c0, dtype=np.float64)
-    if c.ndim != 5 or c.shape[3:] != (3, 4) or not c.shape[0] == c.shape[1] == c.shape[2]:
-        _bad("c0", f"shape {c.shape} is not (N, N, N, 3, 4)", "pass an SH grid [z, y, x, colour, coeff]")
-    return _finite("c0", c)
-
-
-def _skip(skip):
-    if isinstance(skip, bool) or not isinstance(skip, (int, np.integer)) or skip < 0:
-        _bad("skip", f"must be an integer >= 0, got {skip!r}", "pass e.g. 2 (paper Sec. 4)")
-    return int(skip)
-
-
-# ---------------------------------------------------------------- operator
-
-def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None, empty=None):
-    """One propagation step (Sec. 3.2, Eq. 3, Sec. 4) as sparse matrices, one per colour.
-
-    Returns a list of three ``scipy.sparse.csr_matrix`` of shape
-    ``(4 N^3, 4 N^3)`` such that, per colour ``col``,
-    ``(P[col] @ c[..., col, :].reshape(-1)).reshape(N, N, N, 4)`` is one step
-    of :func:`sslpv_gl.twin.propagate` (module docstring: ordering and entry
-    formula). Material arrays broadcast to ``(N, N, N, 3)``; ``N`` is taken
-    from the first of them that has three or more dimensions. ``dx`` is a
-    scalar or ``(dx, dy, dz)``; the step along an axis uses that axis' width.
-    ``emit`` (default 1) multiplies what each SOURCE cell sends on: 0 makes a
-    sink cell (:mod:`sslpv_gl.boundary`), as in :func:`sslpv_gl.twin.propagate`
-    (whose first step, like :func:`steady_state`'s, uses the operator without sinks).
-    ``empty`` (default 0) marks empty cells: the entry from ``s`` to ``d`` is multiplied
-    by ``1 - empty[s] empty[d]`` (``outside = interior``, at every step).
-
-    All three matrices share one sparsity pattern (36 entries per cell away
-    from the boundary). It is built once, vectorised, directly in CSR order
-    (destination cell, row coefficient, source, column coefficient: no sort);
-    each colour's ``data`` is then two gathers.
-    """
-    N = _grid_size(sigma_lpv, sigma_s_prime, g)
-    sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
-    em = _material(1.0 if emit is None else emit, 0.0, 0.0, N)[0]
-    emp = None if empty is None else _material(empty, 0.0, 0.0, N)[0]
-    dxs = _dx(dx)
-    mats = propagation_matrices() if matrices is None else np.asarray(matrices, dtype=np.float64)
-    if mats.shape != (6, 4, 4):
-        _bad("matrices", f"shape {mats.shape} is not (6, 4, 4)", "pass propagation_matrices()")
-    _finite("matrices", mats)
-    k1 = scatter_factors(spr, gg)[..., 1]    # Eq. 3, band 1 of the SOURCE cell; band 0 is 1
-    drop = _DROP * max(float(np.abs(mats).max()), np.finfo(float).tiny)
-    n_cells = N ** 3
-    cells = np.arange(n_cells, dtype=np.int64).reshape(N, N, N)
-
-    # Entries are laid out [destination cell, row coefficient a, source s, column
-    # coefficient b], which is CSR row order; sources ordered -z, -y, -x, +x, +y, +z
-    # have ascending cell numbers, so the column indices come out sorted too.
-    order = [5, 3, 1, 0, 2, 4]
-    src_cell = np.full((n_cells, 6), -1, dtype=np.int64)
-    att = np.zeros((n_cells, 6, 3))
-    k1_src = np.zeros((n_cells, 6, 3))
-    for j, s in enumerate(order):
-        offset = SOURCE_OFFSETS[s]
-        dst, src = neighbour_slices(offset)
-        axis = int(np.flatnonzero(offset)[0])
-        src_cell[cells[dst].ravel(), j] = cells[src].ravel()
-        # half the path lies in each cell (conventions: mean of source and destination)
-        a = np.exp(-0.5 * (sig[src] + sig[dst]) * dxs[axis]) * em[src]
-        if emp is not None:                          # no link between two empty cells
-            a = a * (1.0 - emp[src] * emp[dst])
-        att[cells[dst].ravel(), j] = a.reshape(-1, 3)
-        k1_src[cells[dst].ravel(), j] = k1[src].reshape(-1, 3)
-    m = mats[order].transpose(1, 0, 2)                       # (a, s, b)
-    keep = (np.abs(m) > drop)[None] & (src_cell >= 0)[:, None, :, None]   # (cell, a, s, b)
-    kept = np.flatnonzero(keep.ravel())
-    n = 4 * n_cells
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(keep.reshape(n, -1).sum(axis=1), out=indptr[1:])
-    del keep
-    # decompose the kept positions once; every colour then needs two gathers
-    cell, rest = np.divmod(kept, 96)
-    a_sb = rest % 24                                         # (s, b) within the row
-    m_idx = rest                                             # (a, s, b) in m
-    csb = cell * 24 + a_sb                                   # (cell, s, b) of the factor below
-    del kept, rest
-    indices = (4 * src_cell.ravel()[cell * 6 + a_sb // 4] + a_sb % 4).astype(np.int32)
-    del cell, a_sb
-    idx_dtype = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
-    indptr = indptr.astype(idx_dtype)
-    indices = indices.astype(idx_dtype, copy=False)
-    m_flat = m.ravel()[m_idx]
-    del m_idx
-    out = []
-    for col in range(3):
-        # band 0 leaves the source unscaled, band 1 is scaled by the source's k1 (Eq. 3)
-        factor = np.empty((n_cells, 6, 4))
-        factor[:, :, 0] = att[:, :, col]
-        factor[:, :, 1:] = (att[:, :, col] * k1_src[:, :, col])[:, :, None]
-        mat = sp.csr_matrix((m_flat * factor.ravel()[csb], indices, indptr), shape=(n, n))
-        mat.has_sorted_indices = True
-        out.append(mat)
-    return out
-
-
-def _red_black(N):
-    """Row indices of the even and odd cells ((x + y + z) % 2), 4 coefficients each."""
-    z, y, x = np.meshgrid(*(np.arange(N),) * 3, indexing="ij")
-    par = np.repeat(((x + y + z) % 2).ravel(), 4)
-    return np.flatnonzero(par == 0), np.flatnonzero(par == 1)
-
-
-class _Split:
-    """``P`` in red/black blocks; ``reduced`` applies ``P_br P_rb`` (two half products)."""
-
-    def __init__(self, P, red, black):
-        self.red, self.black = red, black
-        Pr = P[red]
-        Pb = P[black]
-        self.P_rb = Pr[:, black].tocsr()     # red rows, black columns
-        self.P_br = Pb[:, red].tocsr()
-        self.products = 0                    # counts of P_br P_rb, ~ one full P product each
-
-    def reduced(self, y):
-        self.products += 1
-        return self.P_br @ (self.P_rb @ y)
-
-
-def spectral_radius(P, tol=1e-3, _split=None):
-    """Spectral radius of one colour's transfer operator ``P`` (ARPACK, or dense when small).
-
-    Uses ``rho(P) = sqrt(rho(P_br P_rb))`` (module docstring, "Solver"): the
-    reduced operator has no ``+-`` pairs, so ARPACK's largest-modulus Ritz
-    value converges in one or two restarts. The start vector is a seeded
-    random one, so no symmetry of the scene hides the dominant mode.
-    Returns a float.
-    """
-    n = P.shape[0]
-    if _split is None:
-        N = round((n // 4) ** (1.0 / 3.0))
-        _split = _Split(P, *_red_black(N))
-    m = _split.black.size
-    if m == 0:
-        return 0.0
-    if m <= _DENSE_EIG_MAX:
-        Q = (_split.P_br @ _split.P_rb).toarray()
-        return float(np.sqrt(np.abs(np.linalg.eigvals(Q)).max()))
-    op = spla.LinearOperator((m, m), matvec=_split.reduced, dtype=np.float64)
-    v0 = np.random.default_rng(12345).random(m) + 0.5
-    try:
-        w = spla.eigs(op, k=1, which="LM", tol=tol, ncv=min(20, m - 1), maxiter=200,
-                      v0=v0, return_eigenvectors=False)
-    except spla.ArpackNoConvergence as exc:
-        w = exc.eigenvalues
-        if w is None or len(w) == 0:
-            _bad("steady_state", "ARPACK could not estimate the spectral radius of the transfer operator",
-                 "pass check_spectrum=False to skip the check, or use propagate_until")
-    except spla.ArpackError:
-        # ARPACK stops when its Krylov space closes on an invariant subspace (seen as
-        # "starting vector is zero" on a scene whose lit cells reach only part of the grid):
-        # estimate the radius by power iteration on the reduced operator instead
-        return _power_radius(_split.reduced, v0)
-    return float(np.sqrt(np.abs(w).max()))
-
-
-def _power_radius(apply, v, iterations=400):
-    """sqrt of the growth rate of ``||Q^k v||`` (the reduced operator Q = P_br P_rb) over ``iterations``."""
-    v = v / np.linalg.norm(v)
-    rate = 0.0
-    for k in range(iterations):
-        w = apply(v)
-        norm = float(np.linalg.norm(w))
-        if norm == 0.0:
-            return 0.0                               # nilpotent on this start: the series converges
-        rate = norm
-        v = w / norm
-    return float(np.sqrt(rate))
 
 
 # ------------------------------------------------------------ steady state

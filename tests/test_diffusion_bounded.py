@@ -13,7 +13,7 @@ medium (4.5 reduced mean free paths across, albedo 0.99, g = 0.3). Media whose
 import numpy as np
 import pytest
 
-from sslpv_gl import bounded, lattice, twin
+from sslpv_gl import bounded, diffusion, twin
 from sslpv_gl.material import lpv_material
 from sslpv_gl.sh import clamped_cosine_coeffs, hemisphere_radiance
 
@@ -71,7 +71,7 @@ class TestSphere:
             print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, phi ratio {o['ratio'].min():.3f}..{o['ratio'].max():.3f}")
             assert o["escape"] == pytest.approx(esc_d, rel=TOL)
             assert np.all(np.abs(o["ratio"] - 1.0) < TOL)
-            assert o["kappa"] == pytest.approx(float(lattice.diffusion_coefficients(*med)[2]) * 2 / 32, rel=1e-12)
+            assert o["kappa"] == pytest.approx(float(diffusion.diffusion_coefficients(*med)[2]) * 2 / 32, rel=1e-12)
 
 
 class TestSphereLitFromOneSide:
@@ -115,7 +115,7 @@ class TestSinkRadiance:
                               sigma_t=np.full((4, 4, 4, 3), 30.0, np.float32),
                               albedo=np.full((4, 4, 4, 3), 0.95, np.float32), g=np.zeros((4, 4, 4, 3), np.float32))
         m = lpv_material(med, inside, N, "diffusion", outside=outside)
-        R = float(lattice.diffusion_mapping(30.0, 0.95, 0.0, 1.0 / N)["radiance_scale"])
+        R = float(diffusion.diffusion_mapping(30.0, 0.95, 0.0, 1.0 / N)["radiance_scale"])
         rs = m["radiance_scale"][..., 0]
         np.testing.assert_allclose(rs[inside], R, rtol=1e-6)
         medium = m["sigma_lpv"][..., 0] > 0

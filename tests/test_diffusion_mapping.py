@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sslpv_gl import lattice, twin
+from sslpv_gl import diffusion, lattice, twin
 from sslpv_gl.material import MAPPINGS, lpv_material, map_material, map_material_full
 from sslpv_gl.sh import hemisphere_radiance
 
@@ -41,7 +41,7 @@ def _triples():
 
 def _green(sigma_t, albedo, g, r):
     """Eq. (14): phi = P exp(-sigma_tr r) / (4 pi D r) for P = 1."""
-    sigma_a, sigma_tp, sigma_tr = lattice.diffusion_coefficients(sigma_t, albedo, g)
+    sigma_a, sigma_tp, sigma_tr = diffusion.diffusion_coefficients(sigma_t, albedo, g)
     D = 1.0 / (3.0 * sigma_tp)
     return np.exp(-sigma_tr * r) / (4.0 * np.pi * D * r)
 
@@ -71,7 +71,7 @@ def _steady_fluence(N, K):
     U = acc + tail
     off, r = _shell(N)
     idx = (h + off[:, 2], h + off[:, 1], h + off[:, 0])
-    F = lattice.fluence_scale(sigma_t, albedo, g, dx)  # Eq. (18), per channel
+    F = diffusion.fluence_scale(sigma_t, albedo, g, dx)  # Eq. (18), per channel
     phi = F * U[idx][..., 0]
     tail_share = (tail[idx][..., 0] / U[idx][..., 0]).max(axis=0)
     return phi, r * dx, off, tail_share, dx
@@ -104,7 +104,7 @@ def _check_green(N, K):
     wrong_scale = float(lattice.d_lpv(0.0)) / float(lattice.d_lpv(lattice.DIFFUSION_K1))
     assert np.all(np.abs(ratio * wrong_scale - 1).max(axis=0) > TOL)
     # (c) the physical D (cm^2 per unit length) in place of D_lpv dx (cell^2): off by orders of magnitude
-    _, sigma_tp, _ = lattice.diffusion_coefficients(sigma_t, albedo, g)
+    _, sigma_tp, _ = diffusion.diffusion_coefficients(sigma_t, albedo, g)
     wrong_d = (1.0 / (3.0 * sigma_tp)) / dx / float(lattice.d_lpv(lattice.DIFFUSION_K1))
     assert np.all(np.abs(ratio * wrong_d - 1).max(axis=0) > TOL)
     return worst
@@ -125,9 +125,9 @@ class TestResolutionIndependence:
     def test_lattice_diffusion_length_at_every_dx(self):
         # Eq. (11), (15)-(16): sqrt(lambda0 D_lpv / (1 - lambda0)) dx = 1 / sigma_tr for any dx
         sigma_t, albedo, g = _triples()
-        _, _, sigma_tr = lattice.diffusion_coefficients(sigma_t, albedo, g)
+        _, _, sigma_tr = diffusion.diffusion_coefficients(sigma_t, albedo, g)
         for dx in (1e-3, 0.01, 0.1, 0.5):
-            m = lattice.diffusion_mapping(sigma_t, albedo, g, dx)
+            m = diffusion.diffusion_mapping(sigma_t, albedo, g, dx)
             lam0 = lattice.survival(m["sigma_lpv"] * dx)
             ell = np.sqrt(lam0 * m["d_lpv"] / (1.0 - lam0)) * dx
             np.testing.assert_allclose(ell, 1.0 / sigma_tr, rtol=1e-9)
@@ -138,7 +138,7 @@ class TestResolutionIndependence:
         # of N = 16 .. 128 grids on the suite's spheres, and with a wrong sigma_lpv
         N = 64
         sigma_t, albedo, g = 1.0, 1.0 - kappa**2 / 3.0, 0.0       # sigma_t' = 1, sigma_tr = kappa, dx = 1
-        m = lattice.diffusion_mapping(sigma_t, albedo, g, 1.0)
+        m = diffusion.diffusion_mapping(sigma_t, albedo, g, 1.0)
         assert float(m["kappa"]) == pytest.approx(kappa, rel=1e-12)
         off, r = _shell(N)
         c = np.zeros((N, N, N, 4))
@@ -159,7 +159,7 @@ def test_band1_is_slaved_to_the_gradient():
     # Eq. (22): in the steady state c11 = 2 v lambda0 / (1 - b k1 lambda0) dU/dx (cells), exact lattice route
     c = lattice.constants()
     N, kappa, k1 = 48, 0.2, lattice.DIFFUSION_K1
-    m = lattice.diffusion_mapping(1.0, 1.0 - kappa**2 / 3.0, 0.0, 1.0)
+    m = diffusion.diffusion_mapping(1.0, 1.0 - kappa**2 / 3.0, 0.0, 1.0)
     s = np.zeros((N, N, N, 4))
     s[0, 0, 0, 0] = 1.0
     U = lattice.periodic_steady_state(s, k1, float(m["sigma_lpv"]))
@@ -173,7 +173,7 @@ class TestMappingValues:
     def test_formulas(self):
         # Eq. (14)-(21) evaluated from their definitions
         sigma_t, albedo, g, dx = np.array([8.0, 6.0, 20.0]), np.array([0.99, 0.6, 0.98]), np.array([0.0, 0.3, 0.8]), 0.07
-        m = lattice.diffusion_mapping(sigma_t, albedo, g, dx)
+        m = diffusion.diffusion_mapping(sigma_t, albedo, g, dx)
         sa = sigma_t * (1 - albedo)
         sigma_tp = sa + sigma_t * albedo * (1 - g)
         D = 1 / (3 * sigma_tp)
@@ -193,7 +193,7 @@ class TestMappingValues:
     def test_radiance_scale_makes_isotropic_shading_absolute(self):
         # Eq. (21): R * hemisphere_radiance(c, n, dx^2) = phi / (4 pi) for an isotropic cell
         dx = 0.05
-        m = lattice.diffusion_mapping(8.0, 0.99, 0.0, dx)
+        m = diffusion.diffusion_mapping(8.0, 0.99, 0.0, dx)
         c = np.array([2.5, 0.0, 0.0, 0.0])
         phi = float(m["fluence_scale"]) * c[0]
         L = float(m["radiance_scale"]) * hemisphere_radiance(c, np.array([0.0, 0.0, 1.0]), dx**2)
@@ -201,7 +201,7 @@ class TestMappingValues:
 
     def test_no_absorption_and_vacuum(self):
         # sigma_a = 0: infinite diffusion length, nothing to match: sigma_lpv = 0 and the kappa -> 0 scale (Eq. (19))
-        m = lattice.diffusion_mapping(np.array([5.0, 0.0]), np.array([1.0, 0.5]), 0.2, 0.1)
+        m = diffusion.diffusion_mapping(np.array([5.0, 0.0]), np.array([1.0, 0.5]), 0.2, 0.1)
         np.testing.assert_array_equal(m["sigma_lpv"], [0.0, 0.0])
         Dl = float(lattice.d_lpv(lattice.DIFFUSION_K1))
         assert m["fluence_scale"][0] == pytest.approx(np.sqrt(4 * np.pi) * Dl * 3 * 5.0 * 0.8 / 0.1, rel=1e-12)
@@ -210,7 +210,7 @@ class TestMappingValues:
     def test_registry_and_map_material(self):
         assert "diffusion" in MAPPINGS
         s, sp = map_material(np.array([8.0]), np.array([0.99]), 0.05, "diffusion", g=0.3)
-        m = lattice.diffusion_mapping(8.0, 0.99, 0.3, 0.05)
+        m = diffusion.diffusion_mapping(8.0, 0.99, 0.3, 0.05)
         np.testing.assert_allclose(s, m["sigma_lpv"])
         np.testing.assert_allclose(sp, 1.0)
 
@@ -232,7 +232,7 @@ class TestMappingValues:
                               albedo=rng.uniform(0.5, 1.0, (n, n, n, 3)).astype(np.float32),
                               g=rng.uniform(-0.5, 0.9, (n, n, n, 3)).astype(np.float32))
         mat = lpv_material(med, None, n, "diffusion", resample="point")
-        m = lattice.diffusion_mapping(med.sigma_t.astype(np.float64), med.albedo.astype(np.float64),
+        m = diffusion.diffusion_mapping(med.sigma_t.astype(np.float64), med.albedo.astype(np.float64),
                                       med.g.astype(np.float64), 1.2 / n)
         for key in ("sigma_lpv", "sigma_s_prime", "g", "radiance_scale"):
             np.testing.assert_allclose(mat[key], m[key].astype(np.float32), rtol=1e-6, err_msg=key)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from harness.errors import InputError
-from sslpv_gl import lattice, twin
+from sslpv_gl import diffusion, lattice, twin
 from sslpv_gl.sh import SOURCE_OFFSETS, propagation_matrices
 
 
@@ -147,7 +147,7 @@ def test_source_offsets_are_what_symbol_assumes():
 
 def test_bad_k1_is_input_error():
     with pytest.raises(InputError, match="k1"):
-        lattice.diffusion_mapping(1.0, 0.9, 0.0, 0.1, k1=1.5)
+        diffusion.diffusion_mapping(1.0, 0.9, 0.0, 0.1, k1=1.5)
 
 
 def test_main_runs(capsys, monkeypatch):

@@ -55,10 +55,10 @@ def test_cluster_reference_is_bit_identical_to_serial_and_survives_a_dead_worker
     client) give each seed several jobs per step, which the two workers finish in any order."""
     from dask.distributed import Client, LocalCluster
 
-    from harness.reference import render
+    from harness.reference import plan
     from harness.reference.render import render_reference
 
-    monkeypatch.setattr(render, "MAX_LANES", 4 * 16 * 16)
+    monkeypatch.setattr(plan, "MAX_LANES", 4 * 16 * 16)
 
     scene = _tiny()
     kw = dict(target_rel_se=0.1, K=4, threads=1, steps=3)
@@ -333,12 +333,12 @@ def test_mean_chord_of_a_sphere_is_four_thirds_r():
 
 def test_estimate_renders_nothing(mi, capsys):
     from harness.cli.main import main
-    from harness.reference import render
+    from harness.reference import plan
 
-    n0 = render.RENDER_COUNT
+    n0 = plan.RENDER_COUNT
     code = main(["reference", "marble_sphere", "--size", "16x16", "--estimate", "--json", "--serial"])
     out = json.loads(capsys.readouterr().out)
-    assert code == 0 and render.RENDER_COUNT == n0
+    assert code == 0 and plan.RENDER_COUNT == n0
     assert out["channel_passes"] == 3 and out["predicted_spp_per_seed"] * 8 == out["predicted_spp_total"]
     assert out["predicted_seconds"] > out["predicted_final_seconds"] > 0
     assert "not rendered" in out["summary"]

@@ -446,32 +446,32 @@ class TestRenderAndCache:
         assert meta["median_rel_se_subsurface"] <= 0.1 and meta["target_met"]
 
     def test_cache(self, mi, tmp_path):
-        from harness.reference import cache, render
+        from harness.reference import cache, plan
 
         scene = _tiny_scene()
-        n0 = render.RENDER_COUNT
+        n0 = plan.RENDER_COUNT
         p1 = cache.reference_for(scene, tmp_path, spp=4, K=2)
-        assert render.RENDER_COUNT == n0 + 1
+        assert plan.RENDER_COUNT == n0 + 1
         assert p1 == tmp_path / scene.name / scene.content_hash[:16]
         # a hit renders nothing (the render count says so; a wall-clock bound would flake under load)
         p2 = cache.reference_for(scene, tmp_path, spp=4, K=2)
-        assert p2 == p1 and render.RENDER_COUNT == n0 + 1
+        assert p2 == p1 and plan.RENDER_COUNT == n0 + 1
         # A changed scene has a new hash and is rendered, never served the old folder.
         changed = _tiny_scene(sigma_t=scene.medium.sigma_t * 1.5)
         assert changed.content_hash != scene.content_hash
         p3 = cache.reference_for(changed, tmp_path, spp=4, K=2)
-        assert p3 != p1 and render.RENDER_COUNT == n0 + 2
+        assert p3 != p1 and plan.RENDER_COUNT == n0 + 2
         assert json.loads((p3 / "reference.json").read_text())["content_hash"] == changed.content_hash
         # An incomplete folder is rendered again.
         (p1 / "half_b.exr").unlink()
         cache.reference_for(scene, tmp_path, spp=4, K=2)
-        assert render.RENDER_COUNT == n0 + 3 and (p1 / "half_b.exr").is_file()
+        assert plan.RENDER_COUNT == n0 + 3 and (p1 / "half_b.exr").is_file()
         # A stored reference.json naming another hash is not served.
         meta = json.loads((p1 / "reference.json").read_text())
         meta["content_hash"] = "0" * 64
         (p1 / "reference.json").write_text(json.dumps(meta))
         cache.reference_for(scene, tmp_path, spp=4, K=2)
-        assert render.RENDER_COUNT == n0 + 4
+        assert plan.RENDER_COUNT == n0 + 4
 
     def test_run_reference_cmd(self, mi, tmp_path, monkeypatch):
         from harness.runs.references import run_reference_cmd

@@ -9,7 +9,7 @@ give the same site as one process does.
 import sqlite3
 from pathlib import Path
 
-import harness.report.build as build
+import harness.report.scene_page as scene_page
 from harness.report import build_report
 from harness.report.memo import Memo
 
@@ -46,9 +46,9 @@ def test_a_changed_metric_redraws_its_plots_only(tmp_path):
 
 def test_parallel_pages_give_the_same_site(tmp_path, monkeypatch):
     store, _ = make_synthetic_store(tmp_path / "s")
-    monkeypatch.setattr(build, "PARALLEL_FROM", 2)                      # two scenes: one process each
+    monkeypatch.setattr(scene_page, "PARALLEL_FROM", 2)                 # two scenes: one process each
     info = build_report(store, tmp_path / "a", memo=False)
-    monkeypatch.setattr(build, "PARALLEL_FROM", 10**9)                  # here, one after the other
+    monkeypatch.setattr(scene_page, "PARALLEL_FROM", 10**9)             # here, one after the other
     build_report(store, tmp_path / "b", memo=False)
     assert _pictures(tmp_path / "a") == _pictures(tmp_path / "b")
     assert len(info["scene_pages"]) == 2 and info["pictures"]["drawn"] > 10

@@ -84,7 +84,7 @@ def _before_after(root, rel, old, new, fingerprint):
     ("sslpv_gl/renderer.py", "Run a public method with this renderer's context current",
      "Run a public method with the context current", set()),
     ("sslpv_gl/propagate.py", "# ping-pong", "# swap the grids", set()),
-    ("harness/report/build.py", "import json\n", "import json\nimport os as _os  # noqa\n", set()),
+    ("harness/report/build.py", "import math\n", "import math\nimport os as _os  # noqa\n", set()),
 ])
 def test_an_edit_rekeys_exactly_the_methods_that_use_it(tree, rel, old, new, changed):
     before, after = _before_after(tree, rel, old, new, _fingerprints)

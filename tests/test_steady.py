@@ -4,7 +4,7 @@ steady-state solve (S2) and steps = auto, each against the NumPy twin's propagat
 import numpy as np
 import pytest
 
-from sslpv_gl import steady
+from sslpv_gl import steady, transfer
 from sslpv_gl.sh import SOURCE_OFFSETS, clamped_cosine_coeffs, propagation_matrices
 from sslpv_gl.twin import propagate
 
@@ -217,9 +217,9 @@ class TestSpectralRadius:
         rng = np.random.default_rng(6)
         c0, sig, sp, g, dx = sphere_scene(8, rng)
         P = steady.transfer_operator(sig, sp, g, dx)[2]
-        monkeypatch.setattr(steady, "_DENSE_EIG_MAX", 10**6)
+        monkeypatch.setattr(transfer, "_DENSE_EIG_MAX", 10**6)
         dense = steady.spectral_radius(P)
-        monkeypatch.setattr(steady, "_DENSE_EIG_MAX", 0)
+        monkeypatch.setattr(transfer, "_DENSE_EIG_MAX", 0)
         arpack = steady.spectral_radius(P)
         assert abs(arpack - dense) < 1e-5
 
@@ -288,7 +288,7 @@ def test_sink_cells_match_the_twin():
 
 def test_power_radius_fallback():
     """The power-iteration fallback (used when ARPACK closes on an invariant subspace) finds a known radius."""
-    from sslpv_gl.steady import _power_radius
+    from sslpv_gl.transfer import _power_radius
 
     d = np.linspace(0.1, 0.81, 50)                 # Q = diag(d): rho(P) = sqrt(rho(Q)) = 0.9
     assert _power_radius(lambda v: d * v, np.ones(50)) == pytest.approx(0.9, rel=1e-6)

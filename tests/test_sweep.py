@@ -163,7 +163,7 @@ class TestBadInput:
     def test_reference_with_nan_is_refused_before_the_store(self, tmp_path, monkeypatch):
         import numpy as np
 
-        from harness.runs import sweep
+        from harness.runs import references
         from harness.io.images import write_exr
 
         ref = tmp_path / "ref"
@@ -172,7 +172,7 @@ class TestBadInput:
         img[3, 4, 1] = np.nan
         for name in ("subsurface", "full", "half_a", "half_b"):
             write_exr(ref / f"{name}.exr", img, se=np.zeros_like(img), extra={"mask": np.ones((64, 64))})
-        monkeypatch.setattr(sweep, "reference_dir", lambda scene, target=None: ref)
+        monkeypatch.setattr(references, "reference_dir", lambda scene, target=None: ref)
         with pytest.raises(InputError, match=r"subsurface\.exr: rgb: contains 1 NaN"):
             small_sweep(tmp_path / "s")
         assert not (tmp_path / "s" / "store.sqlite").exists()

@@ -2,8 +2,9 @@
 
 Modules: :mod:`.phase` (the ``gridhg`` phase function), :mod:`.mitsuba_scene`
 (scene object -> Mitsuba dict), :mod:`.render` (one reference folder with noise
-estimates: the per-seed jobs, the plan of rounds, the serial executor),
-:mod:`.distributed` (the same jobs on a Dask cluster), :mod:`.cost` (the cost model
+estimates, rendered by the serial executor), :mod:`.jobs` (the per-seed jobs and their
+sums), :mod:`.plan` (the plan of rounds: pilot, steps, top-ups), :mod:`.noise` (the noise
+figure), :mod:`.distributed` (the same jobs on a Dask cluster), :mod:`.cost` (the cost model
 behind ``reference --estimate``), :mod:`.cache` (content-addressed cache),
 :mod:`.committed` (the small references committed in ``baselines/refs/``) and
 :mod:`.llvm` (finds an LLVM for the ``llvm_*`` variants). Importing

@@ -256,13 +256,13 @@ def estimate_reference(scene, target, workers=None, scheduler=None, model=None, 
     ``predicted_final_seconds`` adds its per-job cost, ``predicted_seconds`` the pilot and overhead.
     """
     from harness.reference import mitsuba_scene as ms
-    from harness.reference.render import DEFAULT_K
+    from harness.reference.jobs import DEFAULT_K
 
     model = model or load_model()
     if coverage is None:
         ms.use_variant(None)
         coverage = ms.coverage_mask(scene)
-    from harness.reference.render import FULL_COVERAGE
+    from harness.metrics.coverage import FULL_COVERAGE
 
     covered = int((np.asarray(coverage) >= FULL_COVERAGE).sum())
     summ = medium_summary(scene)

@@ -1,8 +1,8 @@
 """References on a Dask cluster: a plan's jobs as tasks, several references at once.
 
-:class:`DaskDriver` runs :class:`harness.reference.render.ReferencePlan` s on a
+:class:`DaskDriver` runs :class:`harness.reference.plan.ReferencePlan` s on a
 ``dask.distributed.Client``: every job of a round (one ``mi.render`` call of one
-pass, seed and chunk; :func:`harness.reference.render.render_job`) is a task; the
+pass, seed and chunk; :func:`harness.reference.jobs.render_job`) is a task; the
 client merges each result as it arrives (in chunk order per seed, once per job)
 and, when a plan's round is complete, asks the plan for its next round. Several
 plans run side by side, so a sweep can render all the references it lacks at once
@@ -27,7 +27,7 @@ import socket
 
 from harness.errors import EnvironmentProblem
 
-from . import render as _render
+from . import jobs as _jobs
 
 #: Seconds between looks at the clock while waiting for tasks (time caps).
 POLL_S = 1.0
@@ -118,7 +118,7 @@ class DaskDriver:
         futures = []
         n = len(jobs)
         for i, job in enumerate(jobs):
-            fut = self.client.submit(_render.render_job, self._setups[key], job, pure=False, retries=self.retries,
+            fut = self.client.submit(_jobs.render_job, self._setups[key], job, pure=False, retries=self.retries,
                                      key=f"reference-{plan.scene.name}-{plan.plan_id}-{job.pass_name}-s{job.seed}"
                                          f"-c{job.chunk}", priority=n - i)
             self._owner[fut] = (plan, job)

@@ -23,6 +23,8 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
+
 from harness.errors import InputError
 
 
@@ -52,6 +54,110 @@ def local_threads(n_workers):
     """Dr.Jit threads per render on a LocalCluster of ``n_workers``: the cores shared out, at least 1."""
     return max(1, (os.cpu_count() or 1) // max(1, int(n_workers)))
 
+
+# --------------------------------------------------------------------------- the references a sweep reads
+
+def reference_coverage(ref_path, layers, shape):
+    """``(coverage, source)``: the coverage of the reference image ``ref_path``, or ``(None, None)``.
+
+    ``layers`` is ``ref_path`` as :func:`harness.io.images.read_exr` read it. The coverage is its
+    ``mask`` layer, else the ``mask.exr`` beside it (a reference folder's); ``source`` names
+    which (``"FILE[mask]"`` or the ``mask.exr`` path). Its
+    :func:`~harness.metrics.coverage.comparison_mask` is the comparison mask of
+    :func:`load_reference` and of ``sslpv-harness compare``.
+    """
+    from harness.io.images import read_exr
+
+    ref_path = Path(ref_path)
+    if layers.get("mask") is not None:
+        return np.asarray(layers["mask"], dtype=np.float32), f"{ref_path}[mask]"
+    beside = ref_path.with_name("mask.exr")
+    if beside.is_file():
+        return read_exr(beside, expect_shape=shape)["rgb"][..., 0], str(beside)
+    return None, None
+
+
+def load_reference(ref_dir, shape):
+    """Arrays the workers compare against: subsurface, full, halves, per-pixel standard errors and the mask.
+
+    ``mask`` is :func:`harness.metrics.coverage.comparison_mask` of the reference's
+    coverage (fully covered pixels only; ``coverage`` keeps the fractions), the one
+    comparison mask of every metric, verdict and calibration. ``se`` and ``se_full``
+    are the standard errors of the subsurface and full images (None where the file
+    has none), ``K`` the number of independent seeds they were estimated from. A reference
+    whose ``reference.json`` says ``"exact": false`` is refused in one line unless
+    ``SSLPV_ALLOW_INEXACT_REFERENCE=1`` (:func:`harness.reference.losses.check_exact`).
+    """
+    import json
+
+    from harness.io.images import read_exr
+    from harness.metrics.coverage import comparison_mask
+
+    from harness.reference.losses import check_exact
+
+    ref_dir = Path(ref_dir)
+    check_exact(ref_dir)      # a reference that says it is not exact is refused without the opt-in
+    sub = read_exr(ref_dir / "subsurface.exr", expect_shape=shape)
+    full = read_exr(ref_dir / "full.exr", expect_shape=shape)
+    mask_layer, _ = reference_coverage(ref_dir / "subsurface.exr", sub, shape)
+    if mask_layer is None:
+        raise InputError(ref_dir, "mask", "the reference has no object mask", "re-render the reference")
+    meta = ref_dir / "reference.json"
+    k = json.loads(meta.read_text()).get("K") if meta.is_file() else None
+    return {"subsurface": sub["rgb"], "full": full["rgb"], "se": sub.get("se"), "se_full": full.get("se"),
+            "half_a": read_exr(ref_dir / "half_a.exr", expect_shape=shape)["rgb"],
+            "half_b": read_exr(ref_dir / "half_b.exr", expect_shape=shape)["rgb"],
+            "coverage": np.asarray(mask_layer, dtype=np.float32), "mask": comparison_mask(mask_layer),
+            "K": int(k) if k else None, "dir": str(ref_dir)}
+
+
+def reference_dir(scene, target=None):
+    """The committed small reference when it matches the scene exactly, else the cache's; None when
+    neither is there (the sweep then renders it on its cluster, :class:`harness.runs.references.SweepReferences`).
+
+    A reference that missed its own noise target is refused in one line
+    (:func:`harness.runs.references.check_target`), never judged against.
+    """
+    from harness.reference.cache import _serves, cache_path, read_reference_meta
+    from harness.reference.committed import find_committed_reference
+
+    committed = find_committed_reference(scene)
+    if committed is not None:
+        check_target(committed, scene.name)
+        return committed
+    folder = cache_path(scene)
+    meta = read_reference_meta(folder)
+    if meta is not None and meta.get("content_hash") == scene.content_hash:
+        check_target(folder, scene.name)
+    target = target or scene.tolerances.get("reference_rel_se")
+    return folder if _serves(meta, scene, {"target_rel_se": float(target)} if target else {}) else None
+
+
+def fetch_references(scenes, target, progress=True):
+    """``(refs, missing)``: each scene's committed or cached reference folder, and the scenes that have
+    none (the sweep renders those on its cluster); one progress line per scene says which."""
+    from harness.progress import Progress
+    from harness.reference.committed import find_committed_reference
+
+    refs, missing = {}, []
+    with Progress("references", len(scenes), unit="references", enabled=progress) as bar:
+        for s in scenes:
+            ref = reference_dir(s, target)
+            if ref is None:
+                t = target or s.tolerances.get("reference_rel_se") or 0.05
+                missing.append(s)
+                bar.log(f"{s.name}: not cached: rendering it with Mitsuba to {100 * float(t):g} % median "
+                        "relative SE on the sweep's cluster, beside the configurations that have a reference")
+            else:
+                refs[s.name] = ref
+                where = ("the committed small reference" if find_committed_reference(s) is not None
+                         else f"the cache ({ref})")
+                bar.log(f"{s.name}: {where}")
+            bar.advance(detail=s.name)
+    return refs, missing
+
+
+# --------------------------------------------------------------------------- the references a sweep renders
 
 class SweepReferences:
     """Render a sweep's missing references on its client, several at once (see the module docstring)."""
@@ -108,7 +214,7 @@ def _client(scheduler, workers, serial):
             raise InputError("--serial", "serial", "renders in this process and takes no cluster",
                              "drop --scheduler/--workers, or drop --serial")
         return None, None, None
-    from harness.runs.sweep import make_client
+    from harness.runs.cluster import make_client
 
     client, cluster = make_client(scheduler, workers)
     if scheduler:
@@ -127,11 +233,11 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     """
     from harness.io.atomic import atomic_dir
     from harness.io.outputs import check_replaceable, check_writable
-    from harness.reference import render as _render
+    from harness.reference import plan as _plan
     from harness.reference.cache import read_reference_meta, reference_for
     from harness.reference.committed import sized_scene
     from harness.reference.render import check_max_seconds
-    from harness.runs.sweep import parse_size
+    from harness.runs.plan import parse_size
     from harness.scene import load_scene
 
     scene = sized_scene(load_scene(scene_name), parse_size(size))
@@ -155,7 +261,7 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
     kwargs = {"spp": spp, "variant": variant, "target_rel_se": target, "max_seconds": max_seconds}
     client, cluster, threads = _client(scheduler, workers, serial)
     try:
-        before = _render.RENDER_COUNT
+        before = _plan.RENDER_COUNT
         folder = reference_for(scene, force=force, client=client, threads=threads, progress=progress, **kwargs)
     finally:
         if client is not None:
@@ -164,7 +270,7 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
             cluster.close()
     meta = read_reference_meta(folder)
     result = {"scene": scene.name, "content_hash": scene.content_hash, "reference_dir": str(folder),
-              "rendered": _render.RENDER_COUNT != before, "out_dir": None, "files": meta["files"],
+              "rendered": _plan.RENDER_COUNT != before, "out_dir": None, "files": meta["files"],
               "median_rel_se_subsurface": meta.get("median_rel_se_subsurface"),
               "median_rel_se_full": meta.get("median_rel_se_full"), "target_rel_se": meta.get("target_rel_se"),
               "target_met": meta.get("target_met"), "capped_by": meta.get("capped_by"),

@@ -2,7 +2,7 @@
 
 SSLPV configurations keep their step groups (:mod:`harness.runs.sweep`); a configuration of
 another method is a :class:`MethodConfig` (its method and validated parameters), rendered
-alone by :func:`harness.runs.worker.run_method` and recorded (``harness.runs.sweep._record``) with
+alone by :func:`harness.runs.worker.run_method` and recorded (``harness.runs.record._record``) with
 its method, its precomputation and its work counts. A sweep product names its method
 (``{"method": "dipole", "gather": ["dense"], ...}``); one without a method is SSLPV's.
 """

@@ -4,7 +4,10 @@
 module                 job
 =====================  ======================================================
 :mod:`.schema`         the tables, at a glance, and the ordered migrations
-:mod:`.store`          :class:`Store`: opening, writing and the queries
+:mod:`.store`          :class:`Store`: opening, checking and migrating the file
+:mod:`.write`          a run's start and end, one configuration with its rows
+:mod:`.queries`        runs, configurations, flat results, metric histories
+:mod:`.values`         canonical JSON, finite numbers, timestamps, rows
 :mod:`.export`         the flat CSV / Parquet export
 :mod:`.provenance`     git commit, package versions and machine of a run
 =====================  ======================================================

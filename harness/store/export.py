@@ -7,7 +7,7 @@ from harness.errors import InputError
 from harness.io.atomic import atomic_write
 from harness.io.outputs import check_writable
 from harness.store.schema import STAGES
-from harness.store.store import _dumps
+from harness.store.values import _dumps
 
 
 #: Fixed leading columns of :meth:`Store.export` (``param.<name>`` columns follow).
@@ -18,7 +18,7 @@ EXPORT_COLUMNS = ["run_id", "config_id", "scene", "scene_hash", "config_key", "s
 
 
 def export(store, path, run_id=None, scene=None):
-    """Write :meth:`Store.results <harness.store.store.Store.results>` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
+    """Write :meth:`Store.results <harness.store.queries.StoreQueries.results>` to ``path``: ``.csv``, or ``.parquet`` when pyarrow is installed.
 
     ``scene`` (a name, or a list of names, each of which must have configurations) keeps only their rows.
 

@@ -1,0 +1,240 @@
+"""The unit of work of a reference render: a reference's passes, its jobs, and their per-seed sums.
+
+A job (:class:`Job`) is one ``mi.render`` call: a pass (``full`` or ``absorber``, RGB or
+one grey channel, :class:`PassSpec`), a seed, the seed's chunk index and a sample count.
+:func:`render_job` is the unit a worker runs, serial or on Dask (it builds each pass's
+Mitsuba scene once per process and keeps it). Chunk ``j`` of seed ``s`` is Mitsuba seed
+``s * CHUNK_SEEDS + j``; absorber passes use seeds ``2 * SEED_STRIDE`` above the full
+pass's, so the two images are independent. :class:`_Estimate` holds a seed set's sums:
+a job's result is its image times its sample count (float64), added per (pass, seed) in
+chunk order and exactly once, whoever rendered it and in whatever order it arrived.
+"""
+
+import collections
+import dataclasses
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from harness.errors import InputError
+
+from . import mitsuba_scene as ms
+from .noise import seed_stats
+
+DEFAULT_K = 8
+SEED_STRIDE = 1 << 16        # separates the seed ranges of pilot/full/absorber passes
+CHUNK_SEEDS = 4096           # Mitsuba seed = seed * CHUNK_SEEDS + chunk index (< 2**32)
+
+
+# --------------------------------------------------------------------------- the unit of work
+
+@dataclasses.dataclass(frozen=True)
+class PassSpec:
+    """One Mitsuba scene of a reference: ``full`` or ``absorber`` (albedo 0), RGB or one grey channel."""
+
+    kind: str                  # "full" | "absorber"
+    channel: int = None        # None: one RGB pass; c: the grey pass of channel c
+
+    @property
+    def name(self):
+        return self.kind if self.channel is None else f"{self.kind}_{'rgb'[self.channel]}"
+
+
+@dataclasses.dataclass
+class RenderSetup:
+    """What a worker needs to build a reference's Mitsuba scenes (shipped once per worker)."""
+
+    scene: object              # harness.scene.Scene
+    variant: str = None
+    threads: int = None        # Dr.Jit threads per render (None: Dr.Jit's default, one per core)
+    extra_emitters: dict = None
+
+    def __post_init__(self):
+        extra = json.dumps(self.extra_emitters, sort_keys=True, default=repr) if self.extra_emitters else ""
+        digest = hashlib.sha256(extra.encode()).hexdigest()[:8]
+        self.key = f"{self.scene.content_hash[:16]}-{self.variant}-{self.threads}-{digest}"
+
+    def passes(self):
+        kinds = ["full"]
+        if self.extra_emitters or ms.absorber_is_black(self.scene) is None:
+            kinds.append("absorber")
+        return [PassSpec(k, c) for k in kinds for c in ms.channel_passes(self.scene.medium)]
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """One ``mi.render`` call: ``spp`` samples of seed ``seed``'s chunk ``chunk`` in one pass."""
+
+    pass_name: str
+    seed: int
+    chunk: int
+    spp: int
+
+    @property
+    def mitsuba_seed(self):
+        # Chunk j of seed s uses Mitsuba seed s * CHUNK_SEEDS + j: distinct across seeds and chunks.
+        return int(self.seed) * CHUNK_SEEDS + int(self.chunk)
+
+
+_LOADED = collections.OrderedDict()      # (setup key, pass name) -> mi.Scene, in this process
+_LOADED_MAX = 8
+
+
+def _mitsuba_scene(mi, setup, spec):
+    key = (setup.key, spec.name)
+    if key not in _LOADED:
+        albedo = 0.0 if spec.kind == "absorber" else None
+        d = ms.build_scene_dict(setup.scene, albedo_override=albedo, extra_emitters=setup.extra_emitters,
+                                channel=spec.channel)
+        _LOADED[key] = mi.load_dict(d)
+        while len(_LOADED) > _LOADED_MAX:
+            _LOADED.popitem(last=False)
+    _LOADED.move_to_end(key)
+    return _LOADED[key]
+
+
+def render_job(setup, job):
+    """Render one :class:`Job` of ``setup`` here; returns ``{"sum": image * spp (float64), "spp", "seconds", "worker"}``.
+
+    The per-seed unit that both the serial renderer and a Dask worker run. Each pass's
+    Mitsuba scene is built on first use in this process and kept.
+    """
+    mi = ms.use_variant(setup.variant)
+    threads = _use_threads(setup.threads)
+    spec = {p.name: p for p in setup.passes()}[job.pass_name]
+    scene = _mitsuba_scene(mi, setup, spec)
+    _fault_injection(job)
+    t0, c0 = time.perf_counter(), time.process_time()
+    img = np.asarray(mi.render(scene, seed=job.mitsuba_seed, spp=int(job.spp)), dtype=np.float64)
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"sum": img * job.spp, "spp": int(job.spp), "seconds": seconds, "cpu_seconds": cpu, "threads": threads,
+            "worker": f"{os.uname().nodename}:{os.getpid()}"}
+
+
+_DEFAULT_THREADS = None
+
+
+def _use_threads(threads):
+    """Set Dr.Jit's thread count for this render (``None``: its default, as found at the first call here)."""
+    global _DEFAULT_THREADS
+    import drjit as dr
+
+    if _DEFAULT_THREADS is None:
+        _DEFAULT_THREADS = dr.thread_count()
+    want = int(threads) if threads else _DEFAULT_THREADS
+    if dr.thread_count() != want:
+        dr.set_thread_count(want)
+    return want
+
+
+def _fault_injection(job):
+    """Test hook: ``SSLPV_REFERENCE_DIE_ONCE=PASS:SEED:CHUNK:MARKER`` kills the Dask worker
+    process that first runs that job (``MARKER`` is a file made on the way out), as a crash would.
+    Nothing happens outside a Dask worker."""
+    spec = os.environ.get("SSLPV_REFERENCE_DIE_ONCE")
+    if not spec:
+        return
+    p, s, c, marker = spec.split(":", 3)
+    if (p, int(s), int(c)) != (job.pass_name, job.seed, job.chunk) or os.path.exists(marker):
+        return
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return
+    Path(marker).write_text(str(os.getpid()))
+    os._exit(1)
+
+
+# --------------------------------------------------------------------------- accumulation
+
+class _Estimate:
+    """Per-(pass, seed) sums and counts over one seed set; results are added in chunk order."""
+
+    def __init__(self, passes, seeds):
+        self.passes, self.seeds = list(passes), list(seeds)
+        self.sums = {(p.name, self.seed_of(p, s)): 0.0 for p in self.passes for s in self.seeds}
+        self.counts = {k: 0 for k in self.sums}
+        self.next_chunk = {k: 0 for k in self.sums}     # next chunk to merge
+        self.planned = {k: 0 for k in self.sums}        # next chunk index to hand out
+        self.pending = {}                                # (pass, seed, chunk) -> result, out of order
+        self.spp = 0                                     # spp per seed once the current round is in
+
+    @staticmethod
+    def seed_of(spec, seed):
+        """The seed a pass renders for logical seed ``seed``: absorber passes use disjoint seeds, so
+        that the full and absorber images are independent and their standard errors add in quadrature."""
+        return seed + (2 * SEED_STRIDE if spec.kind == "absorber" else 0)
+
+    def jobs(self, spp, chunk_spp):
+        """Jobs that add ``spp`` samples to every (pass, seed), in chunks of <= ``chunk_spp``."""
+        out = []
+        for s0 in self.seeds:
+            for p in self.passes:
+                s = self.seed_of(p, s0)
+                done = 0
+                while done < spp:
+                    n = min(chunk_spp, spp - done)
+                    k = (p.name, s)
+                    j = self.planned[k]
+                    if j >= CHUNK_SEEDS or not 0 <= s * CHUNK_SEEDS + j < 2 ** 32:
+                        raise InputError("render_reference", "seed_base", f"seed {s} (chunk {j}) leaves Mitsuba's "
+                                         "32-bit seed range", "use a smaller seed_base or fewer spp")
+                    self.planned[k] = j + 1
+                    out.append(Job(p.name, s, j, n))
+                    done += n
+        return out
+
+    def merge(self, job, result):
+        """Add a job's result; results of one (pass, seed) are added in chunk order, each exactly once."""
+        k = (job.pass_name, job.seed)
+        if job.chunk < self.next_chunk[k] or (job.pass_name, job.seed, job.chunk) in self.pending:
+            return False                                 # already merged: a re-run of a lost job
+        self.pending[(job.pass_name, job.seed, job.chunk)] = result
+        while (job.pass_name, job.seed, self.next_chunk[k]) in self.pending:
+            r = self.pending.pop((job.pass_name, job.seed, self.next_chunk[k]))
+            self.sums[k] = self.sums[k] + r["sum"]
+            self.counts[k] += r["spp"]
+            self.next_chunk[k] += 1
+        return True
+
+    def snapshot(self):
+        return (dict(self.sums), dict(self.counts), dict(self.next_chunk), dict(self.planned), self.spp)
+
+    def restore(self, snap):
+        self.sums, self.counts, self.next_chunk, self.planned, self.spp = (dict(snap[0]), dict(snap[1]),
+                                                                           dict(snap[2]), dict(snap[3]), snap[4])
+        self.pending = {}
+
+    def samples_done(self):
+        """Samples per pixel merged so far, summed over seeds (mean over passes)."""
+        return sum(self.counts.values()) / max(len(self.passes), 1)
+
+    def stack(self, kind):
+        """Per-seed mean images of ``kind`` (``full`` or ``absorber``), (K, H, W, 3); None without that pass."""
+        specs = [p for p in self.passes if p.kind == kind]
+        if not specs:
+            return None
+        out = []
+        for s0 in self.seeds:
+            s = self.seed_of(specs[0], s0)
+            if specs[0].channel is None:
+                out.append(self.sums[(specs[0].name, s)] / self.counts[(specs[0].name, s)])
+            else:
+                chans = [self.sums[(p.name, s)][..., p.channel] / self.counts[(p.name, s)] for p in specs]
+                out.append(np.stack(chans, axis=-1))
+        return np.stack(out)
+
+    def images(self):
+        """(full mean, full se, absorber mean|None, absorber se|None, subsurface mean, subsurface se)."""
+        f, a = self.stack("full"), self.stack("absorber")
+        fm, fse = seed_stats(f)
+        if a is None:
+            return fm, fse, None, None, fm, fse
+        am, ase = seed_stats(a)
+        return fm, fse, am, ase, fm - am, np.sqrt(fse ** 2 + ase ** 2)

@@ -1,0 +1,73 @@
+"""The noise figure of a reference: per-seed statistics and the lit pixels it is measured over.
+
+Each image is the mean of ``K`` independent renders (distinct seeds); the per-pixel
+standard error is ``std(ddof=1) / sqrt(K)`` per channel (:func:`seed_stats`). Lit pixels
+are fully covered by the mesh (coverage >= ``FULL_COVERAGE``) and, per channel, brighter
+than ``LIT_FRACTION`` of that channel's 99th percentile over covered pixels
+(:func:`lit_mask`); the figure is the median of ``se / mean`` over the lit (pixel,
+channel) pairs (:func:`median_rel_se`). A median of SEs estimated from few seeds is
+biased low, by :func:`se_median_factor`. The time a round's samples took per (pass, seed)
+unit is :func:`unit_cost`.
+"""
+
+import math
+
+import numpy as np
+
+from harness.metrics.coverage import FULL_COVERAGE
+
+LIT_FRACTION = 0.01          # lit: brighter than this fraction of the 99th percentile
+
+
+def unit_cost(jobs, overhead=0.0):
+    """Seconds per sample of one (pass, seed) unit from a round's ``jobs`` ``[(pass, spp, seconds)]``.
+
+    Per pass, the lower quartile of its jobs' seconds (scaled to the round's median sample count):
+    a job that compiled a kernel is a slow outlier. The passes' figures are averaged (a grey pass per
+    colour channel costs what its channel's sigma_t makes it cost), and ``overhead`` seconds per job
+    (at most half a job's time) are not counted as samples.
+    """
+    spp = float(np.median([n for _, n, _ in jobs]))
+    t = float(np.mean([np.percentile([sec / n * spp for q, n, sec in jobs if q == p], 25)
+                       for p in sorted({q for q, _, _ in jobs})]))
+    return (t - min(overhead, 0.5 * t)) / spp
+
+
+def seed_stats(stack):
+    """Mean and standard error over the first axis (independent seeds): ``std(ddof=1)/sqrt(K)``."""
+    stack = np.asarray(stack, dtype=np.float64)
+    k = stack.shape[0]
+    mean = stack.mean(axis=0)
+    se = stack.std(axis=0, ddof=1) / math.sqrt(k) if k > 1 else np.full_like(mean, np.inf)
+    return mean, se
+
+
+def lit_mask(mean, coverage):
+    """(H, W, 3) bool: fully covered pixels whose channel exceeds 1 % of its 99th percentile."""
+    covered = coverage >= FULL_COVERAGE
+    out = np.zeros(mean.shape, dtype=bool)
+    if not covered.any():
+        return out
+    for c in range(mean.shape[2]):
+        vals = mean[..., c][covered]
+        thr = LIT_FRACTION * np.percentile(vals, 99.0)
+        out[..., c] = covered & (mean[..., c] > max(thr, 0.0))
+    return out
+
+
+def median_rel_se(mean, se, lit):
+    """Median of se/mean over the lit (pixel, channel) pairs (NaN when nothing is lit)."""
+    if not lit.any():
+        return float("nan")
+    return float(np.median(se[lit] / mean[lit]))
+
+
+def se_median_factor(k):
+    """Median of the estimated SE over its true value for ``k`` seeds: sqrt(median(chi2_{k-1}) / (k-1)).
+
+    A median of per-pixel SE estimates from few seeds is biased low by this factor
+    (0.89 for 4 seeds, 0.95 for 8); the pilot corrects for it when it predicts.
+    """
+    from scipy.stats import chi2
+
+    return math.sqrt(chi2.median(k - 1) / (k - 1))
