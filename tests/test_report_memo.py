@@ -52,3 +52,16 @@ def test_parallel_pages_give_the_same_site(tmp_path, monkeypatch):
     build_report(store, tmp_path / "b", memo=False)
     assert _pictures(tmp_path / "a") == _pictures(tmp_path / "b")
     assert len(info["scene_pages"]) == 2 and info["pictures"]["drawn"] > 10
+
+
+def test_the_order_of_the_configurations_draws_nothing_again(tmp_path, monkeypatch):
+    """A night served from the result cache records its configurations in another order than a night that
+    rendered them (the order renders finished): the same set is the same plot, kept, not drawn again."""
+    from harness.store import Store
+
+    store, _ = make_synthetic_store(tmp_path / "s")
+    first = build_report(store, tmp_path / "a", memo=Memo(tmp_path / "memo"))
+    in_order = Store.configs
+    monkeypatch.setattr(Store, "configs", lambda self, *a, **k: list(reversed(in_order(self, *a, **k))))
+    second = build_report(store, tmp_path / "b", memo=Memo(tmp_path / "memo"))
+    assert second["pictures"] == {"kept": first["pictures"]["drawn"], "drawn": 0}

@@ -27,8 +27,20 @@ def _plot(memo, draw, configs, *args):
     """``draw(configs, *args)`` (a function of :mod:`harness.report.plots`; its output path among ``args``),
     or its picture from the memo when the same configurations were drawn the same way before."""
     outs = [a for a in args if isinstance(a, Path)]
+    configs = canonical_order(configs)
     key = memo.key("plot", draw.__name__, configs_digest(configs), [a.name if isinstance(a, Path) else a for a in args])
     memo.produce(key, outs, lambda: draw(configs, *args))
+
+
+def canonical_order(configs):
+    """``configs`` sorted by method and parameters. A plot is a function of the set of configurations, not of
+    the order the store recorded them in (the order a night's renders finished in; a night served from the
+    result cache records them in the plan's): the memo's key and the drawing both see this order."""
+    return sorted(configs, key=_config_order)
+
+
+def _config_order(c):
+    return json.dumps([c.get("method"), c.get("params")], sort_keys=True, default=str)
 
 
 def _place(src, dst):
