@@ -227,11 +227,42 @@ def write_doc(rows, model, command, path=DOC):
               "prediction after its pilot, where the reference records it (`pilot.predicted_wall_seconds`). "
               "The references do not record the machine's load; on this shared 2-core machine it ranged "
               "from about 2 to 19 and scales seconds, not samples."]
+    tail = model.get("pilot_tail") or {}
+    if tail.get("loo"):
+        lines += ["", f"The pilot's heavy-tail factor (`harness.reference.cost.tail_factor`): exponent "
+                  f"{tail['exponent']:.2f}, fitted on the measured references. Per scene, the noise's fall from the "
+                  "pilot's first round to the whole pilot (2 without heavy tails), the samples the final render "
+                  "needed over the pilot's prediction from the noise, and the factor predicted with the exponent "
+                  "fitted without the scene:", "", "| scene | fall | needed | LOO factor |", "|---|---|---|---|"]
+        lines += [f"| {n} | {fall:.3f} | {need:.2f} | {pred:.2f} |" for n, fall, need, pred in tail["loo"]]
     lines += ["", "Coefficients (time: " + ", ".join(cost.TIME_TERMS) + "): "
               + ", ".join(f"{c:.3f}" for c in model["time"]["coef"]),
               "", "Coefficients (noise: " + ", ".join(cost.NOISE_TERMS) + "): "
               + ", ".join(f"{c:.3f}" for c in model["noise"]["coef"]), ""]
     Path(path).write_text("\n".join(lines))
+
+
+def fit_tail(metas):
+    """The exponent of :func:`harness.reference.cost.tail_factor`, by least squares through the origin of
+    ``log(final spp / pilot's spp)`` on ``log(2 / the noise's fall)`` over references rendered to their target
+    with a two-round pilot; and each scene's leave-one-out prediction ``[(scene, fall, needed, predicted)]``."""
+    pts = []
+    for name, m in sorted(metas.items()):
+        p = m.get("pilot") or {}
+        if "early" not in p or not m.get("target_met"):
+            continue
+        fall = p["early"]["median_rel_se_subsurface"] / p["median_rel_se_subsurface"]
+        want = p.get("spp_per_seed_from_noise", p["first_spp_per_seed"])
+        pts.append((name, fall, m["spp_per_seed"] / want, max(np.log(2.0 / fall), 0.0), np.log(m["spp_per_seed"] / want)))
+
+    def fit(rows):
+        sxx = sum(x * x for *_, x, _ in rows)
+        return sum(x * y for *_, x, y in rows) / sxx if sxx > 0 else 0.0
+
+    k = fit(pts)
+    loo = [(n, fall, need, cost.tail_factor(fall, 1.0, fit([q for q in pts if q[0] != n]), 4.0))
+           for n, fall, need, _, _ in pts]
+    return k, loo
 
 
 def do_fit(out, doc):
@@ -248,6 +279,7 @@ def do_fit(out, doc):
              "family": old["family"], **model,
              "overhead_s": model["overhead_s"] | {"cluster_start": old["overhead_s"]["cluster_start"]},
              "loo": {"worst_factor": max(abs(r["factor_loo"]) for r in rows), "rows": rows},
+             "pilot_tail": dict(zip(("exponent", "loo"), fit_tail(measured_metas()[0]))),
              "family_points": old["family_points"]}
     Path(out).write_text(json.dumps(model, indent=1) + "\n")
     print(f"{'scene':<24} {'spp':>6} {'LOO spp':>8} {'wall s':>8} {'LOO s':>8} {'LOO x':>6} {'in s':>8} {'in x':>6}")

@@ -145,3 +145,37 @@ def test_loo_row_is_recomputed_from_the_committed_references():
     doc = (ROOT / "docs" / "reference_cost.md").read_text()
     assert (f"| two_lights | {meta['target_rel_se']:.1%} | {meta['spp_total']} | {spp} | "
             f"{bench.factor(spp, meta['spp_total']):+.1f} | {meta['wall_seconds']:.1f} | {seconds:.1f} |") in doc
+
+
+def test_tail_factor_is_one_where_the_noise_falls_as_one_over_root_n():
+    """A second route: seeds of normal samples (finite variance) rendered at 4 and 16 samples per seed, over
+    2000 pixels, give the median relative SE's fall that tail_factor expects (2), hence no correction; heavy
+    tails (a Pareto with infinite variance) fall less and are corrected; a stated fall outside [1, 2] clips."""
+    from harness.reference.noise import median_rel_se, seed_stats
+
+    rng = np.random.default_rng(3)
+
+    def fall(draw):
+        s = draw((4, 16, 2000, 1, 1))                       # 4 seeds x 16 samples x 2000 pixels
+        r4 = median_rel_se(*seed_stats(s[:, :4].mean(1)), np.ones((2000, 1, 1), bool))
+        r16 = median_rel_se(*seed_stats(s.mean(1)), np.ones((2000, 1, 1), bool))
+        return r4, r16
+
+    r4, r16 = fall(lambda shape: rng.normal(1.0, 0.5, shape))
+    assert r4 / r16 == pytest.approx(2.0, rel=0.05)
+    assert cost.tail_factor(r4, r16, 2.42, 4.0) < 1.15
+    r4, r16 = fall(lambda shape: rng.pareto(1.5, shape))
+    assert r4 / r16 < 1.8 and cost.tail_factor(r4, r16, 2.42, 4.0) > 1.3
+    assert cost.tail_factor(1.0, 1.0, 2.42, 4.0) == pytest.approx(2.0 ** 2.42)
+    assert cost.tail_factor(3.0, 1.0, 2.42, 4.0) == 1.0 and cost.tail_factor(1.0, 1.0, 10.0, 4.0) == 8.0
+    assert cost.tail_factor(float("nan"), 1.0, 2.42) == 1.0 and cost.tail_factor(2.0, 1.0, 0.0) == 1.0
+
+
+def test_tail_exponent_is_the_fit_of_the_measured_references():
+    """cost_model.json's exponent and its leave-one-out rows are recomputed from cost_suite.json."""
+    bench = _bench()
+    k, loo = bench.fit_tail(bench.measured_metas()[0])
+    model = cost.load_model()
+    assert model["pilot_tail"]["exponent"] == pytest.approx(k, rel=1e-12)
+    assert [r[0] for r in model["pilot_tail"]["loo"]] == [r[0] for r in loo]
+    assert np.allclose([r[3] for r in model["pilot_tail"]["loo"]], [r[3] for r in loo], rtol=1e-12)

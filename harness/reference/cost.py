@@ -237,6 +237,25 @@ def predict_run(model, row, target, K=8, rounds=2, speed=1.0):
     return K * per_seed, spp_s, final, final + pilot
 
 
+def tail_factor(r_early, r_pilot, exponent, spp_ratio=PILOT_SPP / 4):
+    """How much more than ``N ~ 1/SE^2`` a heavy-tailed scene needs, from its pilot's two rounds.
+
+    Between the pilot's first round (4 samples per seed) and the whole pilot (``spp_ratio`` times
+    as many) the median relative SE falls by ``sqrt(spp_ratio)`` (2) where the samples' variance
+    is finite and the seeds' SEs are already near their value. Heavy tails (a forward-peaked phase
+    function, a rough dielectric) make few-sample SEs optimistic and the fall smaller: measured
+    1.4 to 1.5 where the final render needed 2.25 times the pilot's samples, 1.94 to 2.04 where it
+    needed none more (``harness/reference/cost_suite.json``). The factor is
+    ``(sqrt(spp_ratio) / fall) ^ exponent``, at least 1 and at most 8, with ``exponent`` fitted on
+    the suite (``benchmarks/bench_reference_cost.py --fit``, leave-one-scene-out in
+    ``docs/reference_cost.md``). Limits: two points of a noise curve; a scene whose tail shows only
+    beyond 16 samples per seed is not detected.
+    """
+    if not (np.isfinite(r_early) and np.isfinite(r_pilot) and r_early > 0 and r_pilot > 0) or exponent <= 0:
+        return 1.0
+    return float(np.clip((math.sqrt(spp_ratio) * r_pilot / r_early) ** exponent, 1.0, 8.0))
+
+
 def load_model(path=None):
     path = Path(path or MODEL_FILE)
     if not path.is_file():

@@ -28,6 +28,7 @@ from harness.metrics.coverage import FULL_COVERAGE
 from harness.progress import Progress, format_duration
 
 from . import mitsuba_scene as ms
+from .cost import tail_factor
 from .jobs import CHUNK_SEEDS, DEFAULT_K, SEED_STRIDE, _Estimate
 from .noise import LIT_FRACTION, lit_mask, median_rel_se, se_median_factor, unit_cost
 
@@ -240,6 +241,14 @@ class ReferencePlan:
             yield pilot, pilot.jobs(PILOT_SPP - PILOT_EARLY_SPP, self.chunk_spp)
             self._measure_cost()
             r_p, want, capped = self._pilot_predict(pilot, PILOT_SPP)
+            tail = tail_factor(r_e, r_p, self._cost_model_value("pilot_tail", "exponent"), PILOT_SPP / PILOT_EARLY_SPP)
+            self.pilot.update({"spp_per_seed_from_noise": want, "tail_factor": tail})
+            if tail > 1.0 and not capped:
+                self.progress.log(f"pilot: the noise fell by x{r_e / r_p:.2f} from {PILOT_EARLY_SPP} to {PILOT_SPP} spp "
+                                  f"per seed, x{math.sqrt(PILOT_SPP / PILOT_EARLY_SPP):.0f} expected: heavy tails; "
+                                  f"the prediction is raised x{tail:.2f}")
+                want = min(math.ceil(want * tail), self.max_spp_per_seed)
+                capped = "max_spp_per_seed" if want >= self.max_spp_per_seed else None
             self.pilot.update({"median_rel_se_subsurface": r_p,
                                "seconds": seconds + self._round_spp.get("seconds", 0.0), "first_spp_per_seed": want,
                                "predicted_wall_seconds": self._round_wall(want),
@@ -293,14 +302,22 @@ class ReferencePlan:
         self.capped_by = self.capped_by or capped
 
     @staticmethod
-    def _cost_model_job_seconds():
-        """The cost model's seconds per job besides its samples (0 where it has none)."""
+    def _cost_model_value(*keys):
+        """A number of the cost model (``cost_model.json``), 0 where it has none."""
         from harness.reference.cost import load_model
 
         try:
-            return float(load_model()["time"]["c_job"])
+            v = load_model()
+            for k in keys:
+                v = v[k]
+            return float(v)
         except (OSError, KeyError, ValueError, TypeError, InputError):
             return 0.0
+
+    @classmethod
+    def _cost_model_job_seconds(cls):
+        """The cost model's seconds per job besides its samples (0 where it has none)."""
+        return cls._cost_model_value("time", "c_job")
 
     def _cost_model_seconds(self):
         """What the cost model (``reference --estimate``, :func:`harness.reference.cost.estimate_reference`)

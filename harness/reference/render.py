@@ -33,7 +33,9 @@ is one step); after each step the noise is measured, which is the progress the
 The steps follow from the sample counts alone, never from measured times or the
 executor's size: a step's samples are a seed's next chunks (Mitsuba seeds), so a
 timing-dependent step plan would make the serial and the cluster's image differ.
-Heavy tails (rough dielectric boundaries) make a short pilot optimistic, so when
+Heavy tails (rough dielectric boundaries, forward-peaked phase functions) make a short pilot
+optimistic: the noise then falls by less than 2 between the pilot's two rounds, and the prediction
+is raised by :func:`harness.reference.cost.tail_factor` (the log says so); when
 all planned samples are in and the target is still missed, every seed is topped up
 (new Mitsuba seeds) from a new prediction, at most three times. The figure written
 to ``reference.json`` is the one *measured* on the final render (``target_met``
