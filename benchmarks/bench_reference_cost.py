@@ -439,6 +439,9 @@ def do_pilot(names, full_below, path=PILOT_DOC, reuse=False):
     # The scenes the model does not predict within a factor of 2 when it has not seen them (leave-one-out).
     off_model = [r for r in rows if r["scene"] not in loo or abs(loo[r["scene"]]) > 2]
     off_early = [r for r in off_model if abs(factor(r["early_s"], r["measured_s"])) > 2]
+    off_pilot = [r for r in off_model if abs(factor(r["pilot_s"], r["measured_s"])) > 2]
+    late = [r["scene"] for r in rows if r["pilot_at_s"] > 60]
+    missed = [f"{r['scene']}, {factor(r['pilot_s'], r['measured_s']):+.1f}" for r in off_pilot]
     lines = ["# The reference's pilot against the cost model", "",
              f"Written by `.venv/bin/python benchmarks/bench_reference_cost.py --pilot --full-below {full_below:g}"
              f"{' --reuse-measured' if reuse else ''}` at "
@@ -474,9 +477,13 @@ def do_pilot(names, full_below, path=PILOT_DOC, reuse=False):
               f"on the other {len(off_model)} ({', '.join(r['scene'] for r in off_model) or 'none'}) the pilot's "
               f"first round is within a factor of 2 on {len(off_model) - len(off_early)}"
               + (f" (not on {', '.join(r['scene'] for r in off_early)})" if off_early else "")
+              + f", the whole pilot's on {len(off_model) - len(off_pilot)}"
+              + (f" (not on {', '.join(missed)})" if missed else "")
               + f". The first round's prediction was logged within the first minute on "
               f"{len(rows) - len(early_late)} of {len(rows)} scenes"
-              + (f" (later on {', '.join(early_late)})" if early_late else "") + ".", ""]
+              + (f" (later on {', '.join(early_late)})" if early_late else "")
+              + f", the whole pilot's on {len(rows) - len(late)} of {len(rows)}" + (f" (later on {', '.join(late)})" if late
+                                                                                    else "") + ".", ""]
     path.write_text("\n".join(lines))
     print(f"wrote {path}")
 
