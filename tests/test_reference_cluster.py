@@ -376,3 +376,16 @@ def test_unit_cost_averages_the_passes_and_drops_compiling_jobs():
                                                                                     ("b", 6e-3)) for s in range(4)]
     assert unit_cost(jobs, overhead=0.01) == pytest.approx(3e-3, rel=1e-9)
     assert unit_cost(jobs) == pytest.approx(3.1e-3, rel=1e-9)
+
+
+def test_unit_cost_from_kernel_seconds_is_the_mean_per_sample():
+    """With the kernels' own seconds (compilation apart), a pass costs the mean of its jobs' kernel seconds per
+    sample: one job in four at 5 ms per sample among 1 ms ones (a long path) makes 2 ms, not the median's 1 ms;
+    the passes are averaged; a job's wall seconds (here 9 s of compilation) do not count."""
+    from harness.reference.render import unit_cost
+
+    jobs = [("r", 10, 9.0 + 10 * r, 10 * r) for r in (1e-3, 1e-3, 1e-3, 5e-3)] + \
+           [("g", 20, 20 * 4e-3, 20 * 4e-3) for _ in range(4)]
+    assert unit_cost(jobs) == pytest.approx((2e-3 + 4e-3) / 2, rel=1e-12)
+    # A round where one job lacks them falls back to the lower quartile of wall seconds.
+    assert unit_cost(jobs[:-1] + [("g", 20, 20 * 4e-3, None)]) != pytest.approx(3e-3, rel=1e-3)

@@ -108,10 +108,18 @@ def render_job(setup, job):
     spec = {p.name: p for p in setup.passes()}[job.pass_name]
     scene = _mitsuba_scene(mi, setup, spec)
     _fault_injection(job)
+    import drjit as dr
+
+    # Dr.Jit's kernel history times each kernel's execution apart from its compilation (a new sample
+    # count compiles the render's kernels again): the samples' own cost, which the pilot extrapolates.
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()                                   # reading it empties it
     t0, c0 = time.perf_counter(), time.process_time()
     img = np.asarray(mi.render(scene, seed=job.mitsuba_seed, spp=int(job.spp)), dtype=np.float64)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    kernels = sum(float(k.get("execution_time", 0.0)) for k in dr.kernel_history()) / 1000.0   # ms -> s
     return {"sum": img * job.spp, "spp": int(job.spp), "seconds": seconds, "cpu_seconds": cpu, "threads": threads,
+            "kernel_seconds": kernels if 0.0 < kernels <= seconds * 1.05 else None,
             "worker": f"{os.uname().nodename}:{os.getpid()}"}
 
 

@@ -20,16 +20,22 @@ LIT_FRACTION = 0.01          # lit: brighter than this fraction of the 99th perc
 
 
 def unit_cost(jobs, overhead=0.0):
-    """Seconds per sample of one (pass, seed) unit from a round's ``jobs`` ``[(pass, spp, seconds)]``.
+    """Seconds per sample of one (pass, seed) unit from a round's ``jobs`` ``[(pass, spp, seconds[, kernels])]``.
 
-    Per pass, the lower quartile of its jobs' seconds (scaled to the round's median sample count):
-    a job that compiled a kernel is a slow outlier. The passes' figures are averaged (a grey pass per
-    colour channel costs what its channel's sigma_t makes it cost), and ``overhead`` seconds per job
-    (at most half a job's time) are not counted as samples.
+    Where every job has its kernels' execution seconds (Dr.Jit's kernel history, compilation apart),
+    a pass costs the mean of its jobs' kernel seconds per sample: a sample's cost varies with its
+    path's length, and a few long paths weigh in the mean that large jobs will pay. Otherwise, per
+    pass, the lower quartile of its jobs' seconds (scaled to the round's median sample count; a job
+    that compiled a kernel is a slow outlier), less ``overhead`` seconds per job (at most half a
+    job's time). The passes' figures are averaged (a grey pass per colour channel costs what its
+    channel's sigma_t makes it cost).
     """
-    spp = float(np.median([n for _, n, _ in jobs]))
-    t = float(np.mean([np.percentile([sec / n * spp for q, n, sec in jobs if q == p], 25)
-                       for p in sorted({q for q, _, _ in jobs})]))
+    jobs = [tuple(j) + (None,) * (4 - len(j)) for j in jobs]
+    passes = sorted({q for q, *_ in jobs})
+    if all(k is not None for *_, k in jobs):
+        return float(np.mean([np.mean([k / n for q, n, _, k in jobs if q == p]) for p in passes]))
+    spp = float(np.median([n for _, n, _, _ in jobs]))
+    t = float(np.mean([np.percentile([sec / n * spp for q, n, sec, _ in jobs if q == p], 25) for p in passes]))
     return (t - min(overhead, 0.5 * t)) / spp
 
 

@@ -138,7 +138,8 @@ class ReferencePlan:
         self._round_spp["spp"] += result["spp"]
         self._round_spp["seconds"] = self._round_spp.get("seconds", 0.0) + result["seconds"]
         self._round_spp["jobs"] = self._round_spp.get("jobs", 0) + 1
-        self._round_spp.setdefault("each", []).append((job.pass_name, result["spp"], result["seconds"]))
+        self._round_spp.setdefault("each", []).append((job.pass_name, result["spp"], result["seconds"],
+                                                       result.get("kernel_seconds")))
         if self._round_est is self.final:
             self._show()
 
