@@ -64,9 +64,11 @@ import numpy as np
 
 from harness.errors import InputError
 
+from .jobs import DEFAULT_K, PILOT_EARLY_SPP, PILOT_K, PILOT_SPP
+
 MODEL_FILE = Path(__file__).with_name("cost_model.json")
 RR_TAIL = 20.0            # mean extra events under Mitsuba's roulette, survival capped at 0.95: 1 / (1 - 0.95)
-PILOT_JOBS, PILOT_SPP, PILOT_ROUNDS = 4, 16, 2   # render.py's pilot: seeds, spp per seed, rounds
+PILOT_ROUNDS = 2          # the pilot's rounds (PILOT_EARLY_SPP, then the rest of PILOT_SPP), one job per seed each
 TIME_TERMS = ("1", "log tau", "log L", "mneevolpath", "family")
 NOISE_TERMS = ("1", "log tau", "log 1/(1-albedo)", "log 1/(1-|g|)", "cv", "smooth dielectric", "absorber pass",
                "family")
@@ -232,12 +234,12 @@ def predict_run(model, row, target, K=8, rounds=2, speed=1.0):
     spp_s = row["covered"] * row["passes"] * t_pass(model["time"]["coef"], row) / speed
     c_job, c_render = float(model["time"]["c_job"]) / speed, float(model["time"]["c_render"]) / speed
     final = K * per_seed * spp_s + c_job * K * rounds * row["passes"]
-    pilot = (PILOT_JOBS * PILOT_SPP * spp_s + c_job * PILOT_JOBS * PILOT_ROUNDS * row["passes"]
+    pilot = (PILOT_K * PILOT_SPP * spp_s + c_job * PILOT_K * PILOT_ROUNDS * row["passes"]
              + c_render * row["passes"])
     return K * per_seed, spp_s, final, final + pilot
 
 
-def tail_factor(r_early, r_pilot, exponent, spp_ratio=PILOT_SPP / 4):
+def tail_factor(r_early, r_pilot, exponent, spp_ratio=PILOT_SPP / PILOT_EARLY_SPP):
     """How much more than ``N ~ 1/SE^2`` a heavy-tailed scene needs, from its pilot's two rounds.
 
     Between the pilot's first round (4 samples per seed) and the whole pilot (``spp_ratio`` times
@@ -275,7 +277,6 @@ def estimate_reference(scene, target, workers=None, scheduler=None, model=None, 
     ``predicted_final_seconds`` adds its per-job cost, ``predicted_seconds`` the pilot and overhead.
     """
     from harness.reference import mitsuba_scene as ms
-    from harness.reference.jobs import DEFAULT_K
 
     model = model or load_model()
     if coverage is None:

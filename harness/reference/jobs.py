@@ -26,6 +26,9 @@ from . import mitsuba_scene as ms
 from .noise import seed_stats
 
 DEFAULT_K = 8
+PILOT_K = 4                  # the pilot's seeds ...
+PILOT_SPP = 16               # ... and samples per seed, rendered in two rounds:
+PILOT_EARLY_SPP = 4          # the first, whose prediction corrects the cost model's early, then the rest
 SEED_STRIDE = 1 << 16        # separates the seed ranges of pilot/full/absorber passes
 CHUNK_SEEDS = 4096           # Mitsuba seed = seed * CHUNK_SEEDS + chunk index (< 2**32)
 
@@ -112,12 +115,17 @@ def render_job(setup, job):
 
     # Dr.Jit's kernel history times each kernel's execution apart from its compilation (a new sample
     # count compiles the render's kernels again): the samples' own cost, which the pilot extrapolates.
+    # The flag is set back afterwards, so that the history does not grow through later work in this process.
+    history = dr.flag(dr.JitFlag.KernelHistory)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()                                   # reading it empties it
     t0, c0 = time.perf_counter(), time.process_time()
-    img = np.asarray(mi.render(scene, seed=job.mitsuba_seed, spp=int(job.spp)), dtype=np.float64)
-    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-    kernels = sum(float(k.get("execution_time", 0.0)) for k in dr.kernel_history()) / 1000.0   # ms -> s
+    try:
+        img = np.asarray(mi.render(scene, seed=job.mitsuba_seed, spp=int(job.spp)), dtype=np.float64)
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        kernels = sum(float(k.get("execution_time", 0.0)) for k in dr.kernel_history()) / 1000.0   # ms -> s
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, history)
     return {"sum": img * job.spp, "spp": int(job.spp), "seconds": seconds, "cpu_seconds": cpu, "threads": threads,
             "kernel_seconds": kernels if 0.0 < kernels <= seconds * 1.05 else None,
             "worker": f"{os.uname().nodename}:{os.getpid()}"}

@@ -29,12 +29,9 @@ from harness.progress import Progress, format_duration
 
 from . import mitsuba_scene as ms
 from .cost import tail_factor
-from .jobs import CHUNK_SEEDS, DEFAULT_K, SEED_STRIDE, _Estimate
+from .jobs import CHUNK_SEEDS, DEFAULT_K, PILOT_EARLY_SPP, PILOT_K, PILOT_SPP, SEED_STRIDE, _Estimate
 from .noise import LIT_FRACTION, lit_mask, median_rel_se, se_median_factor, unit_cost
 
-PILOT_K = 4
-PILOT_SPP = 16
-PILOT_EARLY_SPP = 4          # the pilot's first round: its prediction corrects the cost model's early
 STEPS = 4                    # the final render is rendered (and its noise measured) in at most this many steps,
 STEP_MIN_SPP = 32            # ... one per this many samples per seed (sample counts only: see the docstring)
 MAX_TOPUPS = 3
@@ -242,7 +239,7 @@ class ReferencePlan:
             yield pilot, pilot.jobs(PILOT_SPP - PILOT_EARLY_SPP, self.chunk_spp)
             self._measure_cost()
             r_p, want, capped = self._pilot_predict(pilot, PILOT_SPP)
-            tail = tail_factor(r_e, r_p, self._cost_model_value("pilot_tail", "exponent"), PILOT_SPP / PILOT_EARLY_SPP)
+            tail = tail_factor(r_e, r_p, self._cost_model_value("pilot_tail", "exponent"))
             self.pilot.update({"spp_per_seed_from_noise": want, "tail_factor": tail})
             if tail > 1.0 and not capped:
                 self.progress.log(f"pilot: the noise fell by x{r_e / r_p:.2f} from {PILOT_EARLY_SPP} to {PILOT_SPP} spp "
