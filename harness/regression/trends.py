@@ -188,7 +188,10 @@ def trend_svg(scene, metric, lines, nights, style):
 
 def legend_svg(lines, style):
     """The legend of every trend figure: one entry per line label, 12 to a column."""
-    ordered = sorted(lines, key=lambda ln: (0, ln[1], _steps(ln[2]), ln[3]) if ln[1] else (1, 0, (0, ""), str(ln[2])))
+    from harness.report.plots import steps_key
+
+    # SSLPV's by N, then K; the rivals' after them.
+    ordered = sorted(lines, key=lambda ln: (0, ln[1], steps_key(ln[2]), ln[3]) if ln[1] else (1, 0, 0, str(ln[2])))
     labels = list(dict.fromkeys(line_label(line) for line in ordered))
     rows = 12
     col_w = 36 + 6 * max(len(lab) for lab in labels)
@@ -205,12 +208,6 @@ def legend_svg(lines, style):
                    f'{dashes}/><text x="{cx + 31}" y="{cy}">{escape(lab)}</text>')
     out.append("</svg>")
     return "\n".join(out) + "\n"
-
-
-def _steps(k):
-    from harness.report.plots import steps_key
-
-    return steps_key(k)
 
 
 def short_mapping(mapping):
