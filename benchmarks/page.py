@@ -1,0 +1,225 @@
+"""A benchmark's own page of figures: ``docs/benchmarks/<name>.md``, headed by its command and commit.
+
+Every figure in ``docs/benchmarks/`` is written here by the benchmark that measured it; nothing is
+copied by hand. A benchmark builds a :class:`Page` as it measures, adds prose, tables and figures
+to it, and writes it when run with ``--write``::
+
+    from page import Page                      # benchmarks/ is on sys.path when a benchmark runs
+    page = Page("bench_sslpv", "SSLPV stage timings on this machine's OpenGL")
+    page.para("One light, 256 x 256 ...")
+    page.table(["config", "RSM [ms]"], [["32^3, 8 steps", "12.6"]])
+    page.write()                               # or page.finish(args.write): prints, and writes if asked
+
+The header states what a reader needs to judge the figures (:func:`header`):
+
+* the command exactly as run (``python benchmarks/<script> <arguments>``);
+* the commit, and ``(with uncommitted changes)`` when the tree differed from it outside
+  ``docs/`` (a page's own output is not a change); a committed page must not say so
+  (``tests/test_benchmark_pages.py``): commit the code, then run the benchmark;
+* the UTC date, the machine (cores, CPU model), the load average when the page was begun and
+  when it was written (a timing taken beside other work is visibly so), and the GL renderer
+  when the benchmark set :attr:`Page.gl_renderer`.
+
+``python benchmarks/page.py`` rewrites the index ``docs/benchmarks.md`` from the pages' headers
+(:func:`write_index`); :meth:`Page.write` does it too. The index also lists the benchmarks that
+write a page of their own elsewhere in ``docs/`` (:data:`OTHER_PAGES`) and every script of
+``benchmarks/`` that has no page yet, with the command that would write it.
+
+Limits: a page records one run. Timings on a shared machine are only as good as the load average
+beside them says; ratios measured in one run are the figures to quote.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = ROOT / "docs" / "benchmarks"
+INDEX = ROOT / "docs" / "benchmarks.md"
+
+#: The first line of every page: what the index and the page test recognise.
+MARK = "<!-- written by a benchmark (benchmarks/page.py); re-run its command to change it -->"
+#: The header's line of provenance, parsed back by :func:`read_header`.
+_PROVENANCE = re.compile(r"^Written by `(?P<command>[^`]+)` at commit `(?P<commit>[0-9a-f]{7,40})`"
+                         r"(?P<dirty> \(with uncommitted changes\))? on (?P<date>\d{4}-\d\d-\d\d \d\d:\d\d UTC)")
+
+#: Benchmarks that write a page of their own outside ``docs/benchmarks/``: (page, script).
+OTHER_PAGES = (("docs/main_job.md", "bench_nightly.py"), ("docs/reference_cost.md", "bench_reference_cost.py"),
+               ("docs/reference_pilot.md", "bench_reference_cost.py"))
+#: Files of ``benchmarks/`` that are not benchmarks.
+NOT_BENCHMARKS = ("page.py",)
+
+
+def _git(*args):
+    out = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=False)
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def commit_state():
+    """``(short commit, dirty)``: dirty when a tracked or new file outside ``docs/`` differs from HEAD."""
+    changes = _git("status", "--porcelain", "--untracked-files=normal", "--", ".", ":!docs")
+    return _git("rev-parse", "--short=10", "HEAD") or "unknown", bool(changes)
+
+
+def _cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown CPU"
+
+
+def _load():
+    try:
+        return "/".join(f"{x:.1f}" for x in os.getloadavg())
+    except OSError:
+        return "?"
+
+
+def command_line(argv=None):
+    """The command as a reader would type it: ``python benchmarks/<script> <args>``."""
+    argv = list(sys.argv if argv is None else argv)
+    script = Path(argv[0])
+    try:
+        script = script.resolve().relative_to(ROOT)
+    except ValueError:
+        script = Path("benchmarks") / script.name
+    return " ".join(["python", str(script), *(shlex.quote(a) for a in argv[1:])])
+
+
+class Page:
+    """One benchmark's page, built as it measures; ``print`` echoes every block to stdout."""
+
+    def __init__(self, name, title, argv=None, echo=True):
+        if not re.fullmatch(r"[a-z0-9_]+", name):
+            raise ValueError(f"page name {name!r}: lower case, digits and _ only")
+        self.name, self.title, self.echo = name, title, echo
+        self.command = command_line(argv)
+        self.load_start = _load()
+        self.gl_renderer = None
+        self.blocks = []
+
+    def _add(self, text):
+        self.blocks.append(text)
+        if self.echo:
+            print(text + "\n", flush=True)
+
+    def para(self, text):
+        """A paragraph (or any markdown block) as given."""
+        self._add(text.strip())
+
+    def heading(self, text):
+        self._add(f"## {text}")
+
+    def bullets(self, items):
+        self._add("\n".join(f"* {item}" for item in items))
+
+    def table(self, header, rows, note=None):
+        """A markdown table; cells are written with ``str``: format numbers before passing them."""
+        lines = ["| " + " | ".join(map(str, header)) + " |", "|" + "---|" * len(header)]
+        for row in rows:
+            if len(row) != len(header):
+                raise ValueError(f"table row {row!r}: {len(row)} cells for {len(header)} columns")
+            lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |")
+        self._add("\n".join(lines) + (f"\n\n{note.strip()}" if note else ""))
+
+    def figure(self, path, alt):
+        """An image already written under ``docs/``; linked relative to the page."""
+        rel = os.path.relpath(Path(path).resolve(), PAGES)
+        self._add(f"![{alt}]({rel})")
+
+    def text(self):
+        commit, dirty = commit_state()
+        now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        machine = f"{os.cpu_count()} cores ({_cpu_model()})"
+        gl = f"; OpenGL: {self.gl_renderer}" if self.gl_renderer else ""
+        head = [MARK, f"# {self.title}", "",
+                f"Written by `{self.command}` at commit `{commit}`{' (with uncommitted changes)' if dirty else ''} "
+                f"on {now}; {machine}, load average {self.load_start} when begun and {_load()} when written{gl}.",
+                ""]
+        return "\n".join(head) + "\n" + "\n\n".join(self.blocks) + "\n"
+
+    def write(self):
+        """Write ``docs/benchmarks/<name>.md`` (whole or not at all) and the index."""
+        PAGES.mkdir(parents=True, exist_ok=True)
+        path = PAGES / f"{self.name}.md"
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(self.text())
+        os.replace(tmp, path)
+        write_index()
+        print(f"wrote {path.relative_to(ROOT)}", file=sys.stderr)
+        return path
+
+    def finish(self, write):
+        """Write the page when ``write`` (a benchmark's ``--write``); the blocks were printed already."""
+        return self.write() if write else None
+
+
+def read_header(path):
+    """``{title, command, commit, dirty, date}`` of a page written here, or None when it is not one."""
+    lines = Path(path).read_text().splitlines()
+    if not lines or lines[0] != MARK:
+        return None
+    title = lines[1][2:] if len(lines) > 1 and lines[1].startswith("# ") else ""
+    for line in lines[2:6]:
+        m = _PROVENANCE.match(line)
+        if m:
+            return {"title": title, "command": m["command"], "commit": m["commit"], "dirty": bool(m["dirty"]),
+                    "date": m["date"]}
+    return None
+
+
+def _first_heading(path):
+    for line in Path(path).read_text().splitlines():
+        if line.startswith("# "):
+            return line[2:]
+    return path.name
+
+
+def index_text():
+    """The index of ``docs/benchmarks.md``, from the pages' headers and the scripts of ``benchmarks/``."""
+    rows, written = [], set()
+    for path in sorted(PAGES.glob("*.md")):
+        h = read_header(path)
+        if h is None:
+            raise ValueError(f"{path.relative_to(ROOT)}: not a page written by benchmarks/page.py (first line)")
+        rows.append(f"| [{h['title']}](benchmarks/{path.name}) | `{h['command']}` | `{h['commit']}`"
+                    f"{' (uncommitted changes)' if h['dirty'] else ''} | {h['date']} |")
+        written.add(h["command"].split()[1].split("/")[-1])
+    other = []
+    for page, script in OTHER_PAGES:
+        other.append(f"| [{_first_heading(ROOT / page)}]({Path(page).name}) | `benchmarks/{script}` |")
+        written.add(script)
+    scripts = sorted(p.name for p in (ROOT / "benchmarks").glob("*.py") if p.name not in NOT_BENCHMARKS)
+    missing = [s for s in scripts if s not in written]
+    out = ["# Benchmarks and their figures", "",
+           "Each page below is written by the benchmark that measured it, headed by the command, the commit, the "
+           "machine and its load (`benchmarks/page.py`); nothing is copied in by hand. Re-run a page's command with "
+           "`--write` to check or renew it. The accuracy map is `docs/results.md` (`sslpv-harness study --docs`); "
+           "the main job's times are `docs/main_job.md`. This index is written by `python benchmarks/page.py`.", "",
+           "| page | command | commit | written |", "|---|---|---|---|", *rows, "",
+           "Benchmarks that write a page of their own elsewhere in `docs/`:", "",
+           "| page | benchmark |", "|---|---|", *other]
+    if missing:
+        out += ["", "Benchmarks without a page yet (run with `--write` to make one): "
+                + ", ".join(f"`{s}`" for s in missing) + "."]
+    return "\n".join(out) + "\n"
+
+
+def write_index():
+    tmp = INDEX.with_name(f".{INDEX.name}.tmp")
+    tmp.write_text(index_text())
+    os.replace(tmp, INDEX)
+
+
+if __name__ == "__main__":
+    write_index()
+    print(f"wrote {INDEX.relative_to(ROOT)}")
