@@ -288,4 +288,6 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "accuracy_sensitivity", 'Power and false alarms of the accuracy verdicts'))

@@ -25,7 +25,8 @@ Parts (``--part``, default all but ``time``, ``rough`` and ``eta2``, which take 
                 of the smooth scenes: energy ratio and relMSE of the subsurface image.
 
 Usage: ``.venv/bin/python benchmarks/bench_mnee.py [--part halfspace eta1 ...] [--variant cuda_ad_rgb]``.
-Every figure in docs/benchmarks.md's section on the exact dielectric reference is printed by this script.
+``--write`` writes the printout to ``docs/benchmarks/bench_mnee[_PART...].md`` (one page per
+``--part`` selection; ``benchmarks/page.py``).
 """
 
 import argparse
@@ -239,6 +240,18 @@ PARTS = {"halfspace": part_halfspace, "eta1": part_eta1, "area-limit": part_area
 DEFAULT_PARTS = ["halfspace", "eta1", "area-limit", "failures"]
 
 
+def _page_name(base, argv):
+    """``base`` for the default parts, else ``base_<part>_<part>...`` (the parts after ``--part``)."""
+    if "--part" not in argv:
+        return base
+    parts = []
+    for a in argv[argv.index("--part") + 1:]:
+        if a.startswith("-"):
+            break
+        parts.append(a.replace("-", "_"))
+    return "_".join([base, *parts])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--part", nargs="+", choices=list(PARTS), default=DEFAULT_PARTS)
@@ -257,4 +270,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, lambda argv: _page_name("bench_mnee", argv),
+                         "The exact smooth-dielectric reference (MNEE): validation and cost"))

@@ -82,4 +82,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from page import run
+
+    raise SystemExit(run(main, "bench_openmp_wait", "FLIP's time under OpenMP's two wait policies"))

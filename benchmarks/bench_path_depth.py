@@ -79,4 +79,6 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "bench_path_depth", 'Energy carried by long paths: depth caps, Russian roulette, spectral tracking'))

@@ -96,4 +96,6 @@ def main():
                   f"the last cluster's speed-up over it {d['wall'] / c['wall']:.2f}", flush=True)
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "bench_reference_cluster", 'Parallel efficiency of references on Dask'))

@@ -204,4 +204,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "bench_steady", 'steps = steady against iterating to convergence'))

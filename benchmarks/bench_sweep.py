@@ -165,4 +165,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "bench_sweep", 'The default sweep per configuration and in step groups'))

@@ -11,10 +11,10 @@ budget (default: the steady state, i.e. converged steps):
   per scene that misses the energy range, what the calibration says stops it;
 * the fitted values of every budget with their standard errors.
 
-It computes nothing: every figure is the calibration's own, so that docs/benchmarks.md quotes what
-``calibrate`` measured.
+It computes nothing: every figure is the calibration's own. ``--write`` puts the tables on the page
+``docs/benchmarks/calibration_<family>.md`` (``benchmarks/page.py``).
 
-Run: ``.venv/bin/python benchmarks/calibration_table.py DIR [--budget "N=32 steps=steady"]``
+Run: ``.venv/bin/python benchmarks/calibration_table.py DIR [--budget "N=32 steps=steady"] [--write]``
 """
 
 import argparse
@@ -30,9 +30,12 @@ def _cell(row):
 
 
 def main(argv=None):
+    from page import Page
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path, help="a calibrate --out folder")
     ap.add_argument("--budget", default=None, help='e.g. "N=32 steps=steady" (default: the steady one, else the last)')
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_<family>.md")
     args = ap.parse_args(argv)
     path = args.dir / "calibration.json"
     if not path.is_file():
@@ -46,6 +49,14 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     r = results[budget]
+    page = Page(f"calibration_{cal['family']}", f"The calibration of the {cal['family']} family")
+    with page.capture(markdown=True):
+        _tables(cal, r, budget, results)
+    page.finish(args.write)
+    return 0
+
+
+def _tables(cal, r, budget, results):
     print(f"calibration of the {cal['family']} family on {len(cal['scenes'])} scenes, budget {budget} "
           f"({cal['command']}; {cal['renders']} renders, {cal['time']['wall_s']:.0f} s)")
     print()
@@ -78,7 +89,6 @@ def main(argv=None):
         print(f"| {name} | {b['sigma_scale']:.4g} ± {b['sigma_scale_se']:.2g} | {b['radiance_scale']:.4g} ± "
               f"{b['radiance_scale_se']:.2g} | {tb['median_held_out_relmse']:.4g} | "
               f"{'met' if tb['energy_met'] else 'not met'} | {'met' if tb['relmse_met'] else 'not met'} |")
-    return 0
 
 
 if __name__ == "__main__":

@@ -107,4 +107,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "diffusion_bounded", 'The diffusion mapping in a bounded domain: lattice against analytic diffusion'))

@@ -1,6 +1,7 @@
 """The dipole kernels on a flat half-space (NumPy, no GPU): total diffuse reflectance and the dense gather's convergence.
 
-Prints two tables (``docs/dipole_rivals.md`` quotes them):
+Prints two tables and, with ``--write``, writes them to ``docs/benchmarks/dipole_plane.md``
+(``benchmarks/page.py``; ``docs/dipole_rivals.md`` links to it):
 
 A. Total diffuse reflectance at normal (and 60 degree) incidence: the standard dipole's closed form (Eq. K2) and
    its quadrature, and the directional dipole's ``pi int S_d dA`` (adaptive quadrature over rings of 720 angles).
@@ -10,8 +11,10 @@ B. The dense gather's sampling of both kernels (the algorithm of ``gather_dense.
    on a triangle lattice of spacing h, with or without the near-field split at rho = 3h), relative error of the
    exit radiance against the kernel's exact plane integral, 4 random exit points per setting.
 
-    .venv/bin/python benchmarks/dipole_plane.py
+    .venv/bin/python benchmarks/dipole_plane.py [--write]
 """
+
+import argparse
 
 import numpy as np
 from scipy.integrate import quad
@@ -48,9 +51,8 @@ def direction(theta_deg):
     return np.array([np.sin(t), 0.0, np.cos(t)])
 
 
-def table_a():
-    print("A. total diffuse reflectance on a half-space (sigma_t' = 1)")
-    print(f"{'eta':>4} {'alpha':>6} {'dipole closed':>14} {'dipole quad':>12} {'dirpole 0 deg':>14} {'dirpole 60 deg':>15}")
+def table_a(page):
+    rows = []
     for eta in (1.0, 1.3):
         for alpha in (0.6, 0.9, 0.99, 0.999):
             m = mat(alpha, eta)
@@ -59,7 +61,10 @@ def table_a():
             q = quad(lambda r: float(kernels.rd_dipole(r, m)[0]) * 2 * np.pi * r, 0, np.inf, limit=400)[0] * t_out
             d0 = np.pi * plane_integral(direction(0), m)
             d60 = np.pi * plane_integral(direction(60), m)
-            print(f"{eta:4.1f} {alpha:6.3f} {closed:14.4f} {q:12.4f} {d0:14.4f} {d60:15.4f}")
+            rows.append([f"{eta:.1f}", f"{alpha:.3f}", f"{closed:.4f}", f"{q:.4f}", f"{d0:.4f}", f"{d60:.4f}"])
+    page.heading("A. Total diffuse reflectance on a half-space (sigma_t' = 1)")
+    page.table(["eta", "albedo", "dipole, closed form", "dipole, quadrature", "dirpole, 0 deg", "dirpole, 60 deg"], rows,
+               note="At eta != 1 both include the exit transmittance's normalisation (module docstring).")
 
 
 def lattice(h, L):
@@ -79,9 +84,8 @@ def near_field(wi, m, rho, kind):
     return rho * np.sum(w * window(r, rho) * r * sd(xi, wi, m, kind).mean(axis=1) * 2 * np.pi)
 
 
-def table_b(rng=np.random.default_rng(0)):
-    print("\nB. dense gather on a plane: relative error of the exit radiance (4 random exit points), eta = 1")
-    print(f"{'kernel':>8} {'alpha':>6} {'theta':>5} {'h/l':>5} {'midpoint only':>28} {'with near field (rho = 3h)':>30}")
+def table_b(page, rng=np.random.default_rng(0)):
+    rows = []
     for kind in ("dipole", "dirpole"):
         for alpha in (0.6, 0.99):
             m = mat(alpha, 1.0)
@@ -103,9 +107,24 @@ def table_b(rng=np.random.default_rng(0)):
                         plain.append(v.sum() * area / exact - 1)
                         split.append((near + np.sum(v * (1 - window(r, rho))) * area) / exact - 1)
                     fmt = lambda e: " ".join(f"{x:+.3f}" for x in e)                           # noqa: E731
-                    print(f"{kind:>8} {alpha:6.2f} {theta:5d} {h:5.1f} {fmt(plain):>28} {fmt(split):>30}")
+                    rows.append([kind, f"{alpha:.2f}", theta, f"{h:.1f}", fmt(plain), fmt(split)])
+    page.heading("B. The dense gather on a plane")
+    page.table(["kernel", "albedo", "theta [deg]", "h / l", "midpoint only", "with near field (rho = 3h)"], rows,
+               note="Relative error of the exit radiance against the kernel's exact plane integral, at 4 random "
+                    "exit points per setting, eta = 1.")
+
+
+def main(argv=None):
+    from page import Page
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/dipole_plane.md")
+    args = ap.parse_args(argv)
+    page = Page("dipole_plane", "The dipole kernels on a flat half-space")
+    table_a(page)
+    table_b(page)
+    page.finish(args.write)
 
 
 if __name__ == "__main__":
-    table_a()
-    table_b()
+    main()

@@ -102,4 +102,6 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "image_tolerance", 'What the floating-point tolerance of "unchanged" must cover'))

@@ -91,4 +91,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from page import run
+
+    raise SystemExit(run(main, "lattice_table", "The steady-state lattice's Green's function against diffusion theory"))

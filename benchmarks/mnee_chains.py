@@ -148,4 +148,7 @@ def area_limit(mi, args):
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, lambda argv: "mnee_chains_area_limit" if "--area-limit" in argv else "mnee_chains",
+                         "Connections through several interfaces"))

@@ -10,6 +10,9 @@ to it, and writes it when run with ``--write``::
     page.table(["config", "RSM [ms]"], [["32^3, 8 steps", "12.6"]])
     page.write()                               # or page.finish(args.write): prints, and writes if asked
 
+or, for a benchmark whose figures are its fixed-width printout, ``with page.capture(): ...``
+(stdout goes to the terminal and, as one preformatted block, to the page).
+
 The header states what a reader needs to judge the figures (:func:`header`):
 
 * the command exactly as run (``python benchmarks/<script> <arguments>``);
@@ -31,6 +34,8 @@ beside them says; ratios measured in one run are the figures to quote.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import re
 import shlex
@@ -53,7 +58,16 @@ _PROVENANCE = re.compile(r"^Written by `(?P<command>[^`]+)` at commit `(?P<commi
 OTHER_PAGES = (("docs/main_job.md", "bench_nightly.py"), ("docs/reference_cost.md", "bench_reference_cost.py"),
                ("docs/reference_pilot.md", "bench_reference_cost.py"))
 #: Files of ``benchmarks/`` that are not benchmarks.
-NOT_BENCHMARKS = ("page.py",)
+NOT_BENCHMARKS = ("page.py",
+                  "reseeded_references.py")       # renders references for accuracy_sensitivity.py; prints no figure
+
+
+def _shown(path):
+    """``path`` relative to the repository where it lies inside it."""
+    try:
+        return str(Path(path).resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
 
 
 def _git(*args):
@@ -131,6 +145,34 @@ class Page:
             lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |")
         self._add("\n".join(lines) + (f"\n\n{note.strip()}" if note else ""))
 
+    def code(self, text):
+        """A preformatted block (a benchmark's own fixed-width printout)."""
+        self._add("```\n" + text.rstrip("\n") + "\n```")
+
+    @contextlib.contextmanager
+    def capture(self, markdown=False):
+        """Everything printed to stdout inside the block goes to the terminal and, as one
+        preformatted block, to the page: for a benchmark whose figures are its printout
+        (``markdown``: the printout is markdown already and goes in as it is)."""
+        buf = io.StringIO()
+
+        class _Tee(io.TextIOBase):
+            def write(self, s):
+                buf.write(s)
+                return sys.__stdout__.write(s)
+
+            def flush(self):
+                sys.__stdout__.flush()
+
+        old, sys.stdout = sys.stdout, _Tee()
+        try:
+            yield
+        finally:
+            sys.stdout = old
+        text = buf.getvalue().strip("\n")
+        if text.strip():
+            self.blocks.append(text if markdown else "```\n" + text + "\n```")
+
     def figure(self, path, alt):
         """An image already written under ``docs/``; linked relative to the page."""
         rel = os.path.relpath(Path(path).resolve(), PAGES)
@@ -155,12 +197,38 @@ class Page:
         tmp.write_text(self.text())
         os.replace(tmp, path)
         write_index()
-        print(f"wrote {path.relative_to(ROOT)}", file=sys.stderr)
+        print(f"wrote {_shown(path)}", file=sys.stderr)
         return path
 
     def finish(self, write):
         """Write the page when ``write`` (a benchmark's ``--write``); the blocks were printed already."""
         return self.write() if write else None
+
+
+def run(main, name, title, markdown=False):
+    """Run a benchmark's ``main()`` with its printout captured on the page ``name``.
+
+    For the benchmarks whose figures are what they print: ``raise SystemExit(run(main, NAME, TITLE))``
+    in place of ``main()``. ``--write`` (taken off the arguments before ``main`` parses them) writes
+    the page; the page is written only when ``main`` returns 0 or None, so a failed run leaves the
+    committed page as it was. The command on the page is the one run, without ``--write``.
+    ``name`` may be a function of the arguments (a benchmark in parts: one page per part).
+    """
+    argv = list(sys.argv)
+    write = "--write" in argv[1:]
+    sys.argv = [a for a in argv if a != "--write"]
+    name = name(sys.argv[1:]) if callable(name) else name
+    if any(a in ("-h", "--help") for a in argv[1:]):
+        print(f"--write: also write docs/benchmarks/{name}.md (benchmarks/page.py)\n")
+        return main()
+    page = Page(name, title, argv=sys.argv, echo=False)
+    with page.capture(markdown=markdown):
+        status = main()
+    if status not in (None, 0):
+        print(f"{name}: exit {status}; page not written", file=sys.stderr)
+        return status
+    page.finish(write)
+    return 0
 
 
 def read_header(path):
@@ -190,7 +258,7 @@ def index_text():
     for path in sorted(PAGES.glob("*.md")):
         h = read_header(path)
         if h is None:
-            raise ValueError(f"{path.relative_to(ROOT)}: not a page written by benchmarks/page.py (first line)")
+            raise ValueError(f"{_shown(path)}: not a page written by benchmarks/page.py (first line)")
         rows.append(f"| [{h['title']}](benchmarks/{path.name}) | `{h['command']}` | `{h['commit']}`"
                     f"{' (uncommitted changes)' if h['dirty'] else ''} | {h['date']} |")
         written.add(h["command"].split()[1].split("/")[-1])
@@ -222,4 +290,4 @@ def write_index():
 
 if __name__ == "__main__":
     write_index()
-    print(f"wrote {INDEX.relative_to(ROOT)}")
+    print(f"wrote {_shown(INDEX)}")

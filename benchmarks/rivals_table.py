@@ -120,4 +120,6 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "rivals_table", 'SSLPV against its rivals on the suite'))

@@ -10,7 +10,7 @@ density 0.5 and range 2) under the sizing rule ``fit = coarsen`` (``dipole_gl.si
 vertex gather's longest row comes from the real precomputation (remeshing, neighbourhoods).
 
     .venv/bin/python benchmarks/shader_loops.py            # prints the markdown table
-    .venv/bin/python benchmarks/shader_loops.py --write    # and replaces it in docs/dipole_rivals.md
+    .venv/bin/python benchmarks/shader_loops.py --write    # and writes docs/benchmarks/shader_loops.md
 """
 
 import argparse
@@ -30,8 +30,6 @@ from dipole_gl.sampling import N_PHI, radial_nodes, sample_count
 from dipole_gl.vertex import precompute
 
 REPO = Path(__file__).resolve().parents[1]
-DOC = REPO / "docs" / "dipole_rivals.md"
-BEGIN, END = "<!-- shader_loops: begin -->", "<!-- shader_loops: end -->"
 N_RAD = len(radial_nodes()[0])
 C = budget.DIRPOLE_CALL_ITERATIONS
 NIGHTLY_VERTEX = {"density": 0.5, "range": 2.0}
@@ -193,17 +191,13 @@ def table(figs):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--write", action="store_true", help=f"replace the table between the markers in {DOC.name}")
     ap.add_argument("--scenes", help="comma-separated scenes (default: the suite)")
     args = ap.parse_args(argv)
     names = args.scenes.split(",") if args.scenes else list_scenes()
-    text = table([scene_figures(n) for n in names])
-    print(text)
-    if args.write:
-        doc = DOC.read_text()
-        a, b = doc.index(BEGIN) + len(BEGIN), doc.index(END)
-        DOC.write_text(doc[:a] + "\n" + text + "\n" + doc[b:])
+    print(table([scene_figures(n) for n in names]))
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "shader_loops", "Every shader loop against llvmpipe's loop budget", markdown=True))

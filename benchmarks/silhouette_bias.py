@@ -95,4 +95,6 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, "silhouette_bias", 'How much the silhouette biases the comparison, with the old mask and the new one'))

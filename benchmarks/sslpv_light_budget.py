@@ -1,6 +1,6 @@
-"""Where SSLPV's light goes, and how the error behaves as the grid is refined (parts 3-5).
+"""Where SSLPV's light goes, and how the error behaves as the grid is refined.
 
-Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot for ``refine``):
+Five parts, each printing a table and writing ``OUT/<part>.json`` (and a plot for ``refine``):
 
 ``outside``
     Per suite scene, mapping and outside mode (``sslpv_gl.boundary``), at N = 32: the share of the
@@ -17,9 +17,28 @@ Three parts, each printing a table and writing ``OUT/<part>.json`` (and a plot f
     at the converged accumulation (``steps = steady``), for every index-matched suite scene, every
     mapping and the outside modes ``vacuum``, ``extrapolated`` and ``absorb``. The noise floor is
     the same metric between the reference's two halves.
+``bypass``
+    Light that bypasses the object. The lattice is linear, and ``outside = vacuum`` (the paper's
+    treatment) differs from ``outside = interior`` (:mod:`sslpv_gl.boundary`) only in the transfers
+    between two empty cells, which ``interior`` cuts; so, exactly, per pixel and at any K,
+    image(vacuum) = image(interior) [light that stayed in the medium] + [image(vacuum) -
+    image(interior)] [light that crossed empty cells]. Per scene at N = ``--grid`` and K =
+    ``--steps`` (one propagation per mode, ``render_steps``): the subsurface energy of each part
+    against the committed small reference (absolute where a scene has none), the bypass share
+    ``1 - E(interior) / E(vacuum)``, and ``absorb`` (every empty cell a sink) beside them; mapping
+    ``--mapping``. Limit: at a curved surface the outside-centred cells that hold surface points
+    form a shell; a hop between two neighbouring shell cells counts as bypass although part of each
+    holds medium, so the share bounds the around-the-object light from above.
+``backlit``
+    The back-lit deficit: back-lit, index-matched scenes (default ``backlit_slab``) at N = ``--grid``,
+    ``steps = steady``, ``skip = 0``, for each mapping and outside mode, with the injection at the
+    surface (the paper) and one reduced mean free path inwards (``inject_offset = 1 / sigma_t'``, the
+    dipole's source depth, the mean over colours and cells): E(SSLPV) / E(reference) per colour
+    channel over the pixels both cover. ``benchmarks/diffusion_bounded.py`` prints the same terms on
+    a slab lattice.
 
 Run: ``.venv/bin/python benchmarks/sslpv_light_budget.py --part outside --out reports/light_budget``
-(``--part all`` runs the three; ``--scenes a,b``, and for ``refine`` ``--grids 16,32``, ``--outsides vacuum``
+(``--part all`` runs outside, gap and refine; ``--scenes a,b``, and for ``refine`` ``--grids 16,32``, ``--outsides vacuum``
 and ``--mappings diffusion``, narrow them). ``--merge A/refine.json B/refine.json --out DIR`` renders
 nothing: it joins the rows of several refine runs (each N from the last file that has it), prints them as
 one Markdown table and writes ``DIR/refine.json`` and ``DIR/refine.png``.
@@ -259,6 +278,77 @@ def refine_summary(rows):
     return "\n".join(out)
 
 
+def _energy(res, ref):
+    """Subsurface energy against the reference's over both masks; the absolute energy without one."""
+    from harness.metrics import compute
+
+    if ref is None:
+        return float(res.subsurface[res.mask].sum())
+    return float(compute("energy_ratio", res.subsurface, ref["subsurface"], ref["mask"]).value)
+
+
+def part_bypass(renderer, scenes, ks, mapping="collision", grid=32):
+    from harness.regression.accuracy import load_case_reference, small_scene
+    from sslpv_gl.params import SSLPVParams
+
+    rows = []
+    print(f"N = {grid}, mapping {mapping}; E = subsurface energy / reference's (absolute energy where no reference)")
+    print(f"{'scene':<24} {'lit':<6} {'K':>3} {'E vacuum':>9} {'E stayed':>9} {'E crossed':>9} {'bypass':>7} "
+          f"{'E absorb':>9}")
+    for name in scenes:
+        scene = small_scene(name)
+        try:
+            ref, _ = load_case_reference(scene)
+        except Exception:                      # a scene without a committed reference: absolute energies
+            ref = None
+        lit = "back" if "back-lit" in scene.tags else "front"
+        e = {}
+        for mode in ("vacuum", "interior", "absorb"):
+            p = SSLPVParams(N=grid, steps=ks[0], mapping=mapping, outside=mode)
+            for k, res in zip(ks, renderer.render_steps(scene, p, ks)):
+                e[mode, k] = _energy(res, ref)
+        for k in ks:
+            v, i, a = e["vacuum", k], e["interior", k], e["absorb", k]
+            share = 1.0 - i / v if v > 0 else float("nan")
+            rows.append({"scene": name, "lit": lit, "K": k, "vacuum": v, "interior": i, "absorb": a,
+                         "bypass_share": share, "absolute": ref is None})
+            print(f"{name:<24} {lit:<6} {k:>3} {v:9.4g} {i:9.4g} {v - i:9.4g} {share:7.3f} {a:9.4g}"
+                  + ("" if ref is not None else "   (no reference: absolute)"), flush=True)
+    return rows
+
+
+BACKLIT_CASES = (("diffusion", "vacuum"), ("diffusion", "extrapolated"), ("diffusion", "absorb"),
+                 ("diffusion", "interior"), ("collision", "vacuum"), ("collision", "absorb"), ("collision", "interior"))
+
+
+def part_backlit(renderer, scenes, grid=32):
+    import numpy as np
+
+    from harness.regression.accuracy import load_case_reference, small_scene
+    from sslpv_gl.params import SSLPVParams
+
+    rows = []
+    print(f"N = {grid}, steps = steady, skip = 0")
+    print(f"{'scene':<16} {'mapping':<10} {'outside':<13} {'offset':>7}   E / E_ref (R, G, B)")
+    for name in scenes:
+        scene = small_scene(name)
+        ref, _ = load_case_reference(scene)
+        med = scene.medium
+        st, a, g = (np.asarray(v, dtype=np.float64) for v in (med.sigma_t, med.albedo, med.g))
+        offset = float(1.0 / np.mean(st * (1.0 - a) + st * a * (1.0 - g)))
+        for mapping, outside in BACKLIT_CASES:
+            for off in (0.0, offset):
+                p = SSLPVParams(N=grid, steps="steady", mapping=mapping, outside=outside, skip=0, inject_offset=off)
+                res = renderer.render(scene, p)
+                m = np.asarray(ref["mask"], bool) & res.mask
+                e = res.subsurface[m].sum(axis=0) / np.asarray(ref["subsurface"])[m].sum(axis=0)
+                rows.append({"scene": name, "mapping": mapping, "outside": outside, "inject_offset": off,
+                             "energy_ratio": [float(x) for x in e]})
+                print(f"{name:<16} {mapping:<10} {outside:<13} {off:7.3f}   " + "  ".join(f"{v:.4f}" for v in e),
+                      flush=True)
+    return rows
+
+
 def _grids_of(rows, m, o):
     return sorted({n for r in rows if (r["mapping"], r["outside"]) == (m, o) for n in r["relmse"]})
 
@@ -281,13 +371,36 @@ def _checked(args):
     return scenes, grids, outsides, mappings
 
 
+def _ks(args):
+    from sslpv_gl.params import SSLPVParams
+
+    try:
+        ks = [int(k) for k in args.steps.split(",")]
+    except ValueError:
+        raise InputError("--steps", "steps", f"{args.steps!r} is not a comma-separated list of integers",
+                         "pass e.g. --steps 8,32") from None
+    for k in ks:
+        SSLPVParams(N=args.grid, steps=k, mapping=args.mapping)          # raises the one-line InputError
+    return ks
+
+
+def _page_name(argv):
+    if "--merge" in argv:
+        return "sslpv_light_budget_refine_merged"
+    part = argv[argv.index("--part") + 1] if "--part" in argv[:-1] else "all"
+    return f"sslpv_light_budget_{part}"
+
+
 def main(argv=None):
     from harness.io.atomic import atomic_write
     from sslpv_gl.renderer import SSLPVRenderer
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=["outside", "gap", "refine", "all"], default="all")
-    ap.add_argument("--scenes", help="comma-separated scene names (default: the suite)")
+    ap.add_argument("--part", choices=["outside", "gap", "refine", "bypass", "backlit", "all"], default="all")
+    ap.add_argument("--scenes", help="comma-separated scene names (default: the suite; backlit: backlit_slab)")
+    ap.add_argument("--steps", default="8,32", help="bypass: propagation step counts K")
+    ap.add_argument("--mapping", default="collision", help="bypass: the mapping")
+    ap.add_argument("--grid", type=int, default=32, help="bypass and backlit: the grid N")
     ap.add_argument("--grids", default="16,32,64", help="refine: grid resolutions")
     ap.add_argument("--outsides", default="vacuum,extrapolated,absorb", help="refine: outside modes")
     ap.add_argument("--mappings", default=",".join(MAPPINGS), help="refine: mappings")
@@ -313,6 +426,7 @@ def main(argv=None):
         return
     try:                                   # every value checked before anything is rendered or written
         scenes, grids, outsides, mappings = _checked(args)
+        ks = _ks(args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
@@ -325,6 +439,10 @@ def main(argv=None):
         print(f"\n== {part}")
         if part == "refine":
             rows = part_refine(renderer, scenes, args.out, grids, outsides, mappings)
+        elif part == "bypass":
+            rows = part_bypass(renderer, scenes, ks, args.mapping, args.grid)
+        elif part == "backlit":
+            rows = part_backlit(renderer, scenes if args.scenes else ["backlit_slab"], args.grid)
         else:
             rows = {"outside": part_outside, "gap": part_gap}[part](renderer, scenes, args.out)
         with atomic_write(args.out / f"{part}.json") as tmp:
@@ -333,4 +451,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from page import run
+
+    raise SystemExit(run(main, _page_name, "Where SSLPV's light goes"))

@@ -600,8 +600,8 @@ def test_bad_exrs(cli, tmp_path):
     (["--against", "HEAD", "--N", "64,x"], "--N: N: '64,x' is not a comma-separated list of integers"),
 ], ids=["commit", "grids"])
 def test_propagate_benchmark_bad_values(tmp_path, argv, needle):
-    """benchmarks/bench_propagate.py: one line, exit 2, before a GL context is made."""
-    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_propagate.py"), *argv], cwd=tmp_path,
+    """benchmarks/bench_sslpv.py --against: one line, exit 2, before a GL context is made."""
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bench_sslpv.py"), *argv], cwd=tmp_path,
                           capture_output=True, text=True, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
                           timeout=120)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr

@@ -1,6 +1,6 @@
 """``benchmarks/sslpv_light_budget.py --merge``: several refine runs joined into one table and plot.
 
-The grid-refinement table of docs/benchmarks.md is printed by this merge from the runs' ``refine.json``
+The grid-refinement table is printed by this merge from the runs' ``refine.json``
 files, so the join itself is tested: each N comes from the last file that has it, a
 (scene, mapping) that no file has is shown as ``--``, and a bad file is one line, exit 2.
 """

@@ -1,0 +1,135 @@
+"""The benchmarks' pages are written by the benchmarks, and the index says so (``benchmarks/page.py``).
+
+* ``docs/benchmarks.md`` is exactly what ``python benchmarks/page.py`` writes from the pages today;
+* every page of ``docs/benchmarks/`` has the header only :class:`page.Page` writes (first line,
+  command, commit, date), names a script that exists, and was written from a clean tree: a
+  page that says "with uncommitted changes" is not committed;
+* every script of ``benchmarks/`` writes a page (it uses ``page``), or writes its own elsewhere in
+  ``docs/`` (``page.OTHER_PAGES``), or is declared not a benchmark (``page.NOT_BENCHMARKS``);
+* :func:`page.run` writes nothing without ``--write`` or when the benchmark fails, and writes the
+  command it ran.
+"""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _page_module():
+    spec = importlib.util.spec_from_file_location("bench_page", ROOT / "benchmarks" / "page.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+page = _page_module()
+
+
+def committed_page_problems(path):
+    """Why a page may not be committed as it is (empty when it may)."""
+    h = page.read_header(path)
+    if h is None:
+        return [f"{path.name}: no header written by benchmarks/page.py"]
+    out = []
+    if h["dirty"]:
+        out.append(f"{path.name}: written with uncommitted changes; commit the code, then run the benchmark")
+    script = h["command"].split()[1] if len(h["command"].split()) > 1 else ""
+    if not (ROOT / script).is_file():
+        out.append(f"{path.name}: its command runs {script!r}, which does not exist")
+    return out
+
+
+def test_the_index_is_what_page_py_writes():
+    assert (ROOT / "docs" / "benchmarks.md").read_text() == page.index_text(), \
+        "docs/benchmarks.md is stale: run `python benchmarks/page.py`"
+
+
+def test_every_committed_page_is_a_benchmarks_own():
+    pages = sorted((ROOT / "docs" / "benchmarks").glob("*.md"))
+    problems = [p for path in pages for p in committed_page_problems(path)]
+    assert not problems, problems
+
+
+def test_every_benchmark_writes_a_page():
+    elsewhere = {script for _, script in page.OTHER_PAGES}
+    silent = [p.name for p in sorted((ROOT / "benchmarks").glob("*.py"))
+              if p.name not in page.NOT_BENCHMARKS and p.name not in elsewhere
+              and "from page import" not in p.read_text()]
+    assert not silent, f"benchmarks that write no page: {silent}"
+
+
+@pytest.fixture
+def pages_in(tmp_path, monkeypatch):
+    monkeypatch.setattr(page, "PAGES", tmp_path / "benchmarks")
+    monkeypatch.setattr(page, "INDEX", tmp_path / "benchmarks.md")
+    return tmp_path
+
+
+def test_a_hand_typed_page_is_refused(pages_in):
+    """Power: a page without the writer's header stops the index, and fails the committed-page check."""
+    (pages_in / "benchmarks").mkdir()
+    typed = pages_in / "benchmarks" / "typed.md"
+    typed.write_text("# Figures\n\nWritten by `python benchmarks/dipole_plane.py` at commit `abc1234` on "
+                     "2026-12-01 10:00 UTC; typed.\n\n| a | b |\n|---|---|\n| 1 | 2 |\n")
+    with pytest.raises(ValueError, match="not a page written by benchmarks/page.py"):
+        page.index_text()
+    assert committed_page_problems(typed)
+
+
+def test_a_page_from_a_dirty_tree_is_refused(pages_in, monkeypatch):
+    """Power: the header's "(with uncommitted changes)" fails the committed-page check."""
+    monkeypatch.setattr(page, "_git", lambda *a: "" if a[0] == "status" else "abc1234567")
+    p = page.Page("bench_sslpv", "T", argv=["benchmarks/bench_sslpv.py"], echo=False)
+    p.para("x")
+    text = p.text()
+    line = next(x for x in text.splitlines() if x.startswith("Written by"))
+    dirty = line.replace("` on ", "` (with uncommitted changes) on ", 1) if "uncommitted" not in line else line
+    path = pages_in / "dirty.md"
+    path.write_text(text.replace(line, dirty))
+    assert page.read_header(path)["dirty"]
+    assert any("uncommitted" in why for why in committed_page_problems(path))
+
+
+def test_uncommitted_changes_outside_docs_are_stated(monkeypatch):
+    """The header says "(with uncommitted changes)" exactly when git reports a change outside docs/."""
+    calls = []
+
+    def fake_git(*args, status=""):
+        calls.append(args)
+        return status if args[0] == "status" else "abc1234567"
+
+    monkeypatch.setattr(page, "_git", lambda *a: fake_git(*a, status=" M harness/scene/model.py"))
+    p = page.Page("toy", "Toy", argv=["benchmarks/toy.py"], echo=False)
+    assert page.commit_state() == ("abc1234567", True) and "(with uncommitted changes)" in p.text()
+    assert ":!docs" in next(c for c in calls if c[0] == "status")
+    monkeypatch.setattr(page, "_git", lambda *a: fake_git(*a, status=""))
+    assert page.commit_state() == ("abc1234567", False) and "uncommitted" not in p.text()
+
+
+def _toy(status, printed="| a |\n|---|\n| 1.5 |"):
+    def main():
+        print(printed)
+        return status
+    return main
+
+
+def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch):
+    monkeypatch.setattr(page, "OTHER_PAGES", ())
+    monkeypatch.setattr(page, "_git", lambda *a: "" if a[0] == "status" else "abc1234567")
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--n", "3"])
+    assert page.run(_toy(0), "toy", "Toy") == 0
+    assert not (pages_in / "benchmarks").exists()                    # no --write: nothing written
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--write", "--n", "3"])
+    assert page.run(_toy(1), "toy", "Toy") == 1
+    assert not (pages_in / "benchmarks").exists()                    # a failed run: nothing written
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--write", "--n", "3"])
+    assert page.run(_toy(None), "toy", "Toy", markdown=True) == 0
+    written = pages_in / "benchmarks" / "toy.md"
+    h = page.read_header(written)
+    assert h["command"] == "python benchmarks/toy.py --n 3" and h["title"] == "Toy"
+    assert "| 1.5 |" in written.read_text()
+    assert "[Toy](benchmarks/toy.md)" in (pages_in / "benchmarks.md").read_text()
