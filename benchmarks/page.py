@@ -99,8 +99,8 @@ def _load():
 
 
 def command_line(argv=None):
-    """The command as a reader would type it: ``python benchmarks/<script> <args>``."""
-    argv = list(sys.argv if argv is None else argv)
+    """The command as a reader would type it: ``python benchmarks/<script> <args>`` (without ``--write``)."""
+    argv = [a for a in (sys.argv if argv is None else argv) if a != "--write"]
     script = Path(argv[0])
     try:
         script = script.resolve().relative_to(ROOT)

@@ -341,3 +341,47 @@ def test_a_study_killed_in_its_first_sweep_is_ours(tmp_path, capsys):
     (other / "sweep").mkdir(parents=True)
     with pytest.raises(InputError, match="not a study's folder"):
         check_study_folder(other)
+
+
+# --------------------------------------------------------------------------- FLIP judged by resampling (no GL)
+
+class _StubImages:
+    """Images by name, in place of render folders and a reference folder."""
+
+    def __init__(self, renders, ref):
+        self.renders, self.ref = renders, ref
+
+    def render(self, d):
+        return self.renders[d]
+
+    def reference(self, d, shape):
+        return self.ref
+
+
+def _flip_cells(other_scale):
+    from harness.study.headline import judge_cells
+
+    rng = np.random.default_rng(3)
+    y = 0.2 + rng.random((24, 24, 3))
+    ref = {"subsurface": y, "se": 0.002 * y, "mask": np.ones((24, 24), bool), "K": 8}
+    renders = {"best": y * 1.01, "other": y * other_scale}
+    rows = {f: {"scene": "s", "setting": f, "render_dir": f, "reference_dir": "ref",
+                "subsurface_relmse": float(np.mean((renders[f] - y) ** 2 / (y ** 2 + 1e-2)))} for f in renders}
+    return judge_cells([rows], "relmse", ["flip"], _StubImages(renders, ref))[0]
+
+
+def test_flip_significance_is_judged_by_resampling():
+    """A family far from the best in FLIP is worse beyond noise, by resampling; the same image is tied."""
+    far = _flip_cells(1.6)
+    assert far["best"]["status"] == "best"
+    assert far["other"]["status"] == "worse" and far["other"]["changes"][0]["method"] == "resampling"
+    same = _flip_cells(1.01)
+    assert same["other"]["status"] == "tied"
+
+
+def test_flip_is_a_valid_significance_metric(tmp_path):
+    from harness.study.spec import load_study
+
+    s = load_study(_study(tmp_path, TINY.replace('significance = ["relmse", "energy_ratio"]',
+                                                 'significance = ["relmse", "flip"]')))
+    assert s["significance"] == ["relmse", "flip"]

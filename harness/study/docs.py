@@ -14,7 +14,7 @@ from pathlib import Path
 
 from harness import paths
 from harness.io.atomic import atomic_write
-from harness.study.present import headline_rows, limit_lines
+from harness.study.present import headline_rows, judging_methods, limit_lines
 
 DOC = paths.REPO / "docs" / "results.md"
 FIGURES = ("pareto", "refine_k", "refine_n")
@@ -63,7 +63,8 @@ def write_docs(built, out, doc=DOC):
         "work units per frame). Noise floor: each metric between the reference's two independent halves. Marks: "
         "**best** of the row; ≈ within the reference's noise of the best; worse beyond it; ≈+ better beyond noise "
         "in another metric; ± worse in one, better in another: paired differences of "
-        f"{', '.join(info['significance'])} against the row's best (delta method, tolerance 0, α = {info['alpha']}, "
+        f"{', '.join(info['significance'])} against the row's best ({judging_methods(info['significance'])}, tolerance 0, "
+        f"α = {info['alpha']}, "
         f"Bonferroni over {head['comparisons']['overall']} comparisons × {len(info['significance'])} metrics).",
         "",
         "| scene | noise floor | " + " | ".join(head["families"]) + " |",

@@ -13,14 +13,20 @@ is "is the difference beyond the reference's noise?"), Bonferroni-corrected over
 of the table. A cell is ``best``, ``tied`` (within noise), ``worse`` (beyond it) or, when the
 metrics disagree, ``better-in-part`` or ``mixed`` (:func:`judge_cells`).
 
-Limits: the significance uses the delta-method metrics only (FLIP would need resampling, too slow
-for hundreds of comparisons); the ranking is by one metric; a family with no setting in a budget
-has no cell there.
+A metric with a gradient (relMSE, energy ratio, ...) is judged by the delta method; one without
+(FLIP) by parametric resampling of the reference (:data:`~harness.metrics.uncertainty.DEFAULT_DRAWS`
+draws, seeded by the scene, the two settings and the metric, so a table is reproducible), at
+2 x draws evaluations of the metric per comparison: the default study leaves FLIP out of
+``significance`` for that cost.
+
+Limits: the ranking is by one metric; a family with no setting in a budget has no cell there;
+resampled standard errors rest on :data:`~harness.metrics.uncertainty.DEFAULT_DRAWS` draws
+(their degrees of freedom enter the critical value).
 """
 
 from harness.io.images import read_exr
 from harness.metrics.uncertainty import paired_difference
-from harness.regression.verdict import badness, judge
+from harness.regression.verdict import badness, judge, resample_seed
 
 #: A rival competes in every budget: its key in a budget's cells.
 ANY_K = "any"
@@ -109,7 +115,8 @@ def judge_cells(groups, metric, significance, images=None):
             new = images.render(row["render_dir"])
             changes = []
             for m in significance:
-                diff = paired_difference(m, new, old, ref["subsurface"], ref["se"], ref["mask"], k=ref.get("K"))
+                diff = paired_difference(m, new, old, ref["subsurface"], ref["se"], ref["mask"], k=ref.get("K"),
+                                         seed=resample_seed(row["scene"], best["setting"], row["setting"], m))
                 changes.append(judge(row["scene"], row["setting"], "subsurface", diff, {"rel": 0.0, "abs": 0.0},
                                      family, against=best["setting"]))
             worse = any(c.verdict == "regression" for c in changes)

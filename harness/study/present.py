@@ -97,3 +97,14 @@ def limit_lines(lim):
     else:
         out.append(f"Mapping: not measured ({m['why']}).")
     return out
+
+
+def judging_methods(significance):
+    """How the significance metrics are judged: the delta method, or resampling where there is no gradient."""
+    from harness.metrics.uncertainty import DEFAULT_DRAWS, GRADIENTS
+
+    resampled = [m for m in significance if m not in GRADIENTS]
+    if not resampled:
+        return "delta method"
+    return (("delta method; " if len(resampled) < len(significance) else "")
+            + f"{', '.join(resampled)} by resampling the reference, {DEFAULT_DRAWS} draws")

@@ -28,7 +28,7 @@ from harness.io.outputs import SWEEP_MARKER, check_owned_folder
 from harness.study import figures as figs
 from harness.study.headline import _Images, headline
 from harness.study.limits import limits
-from harness.study.present import budget_rows, headline_rows, limit_lines
+from harness.study.present import budget_rows, headline_rows, judging_methods, limit_lines
 from harness.study.spec import load_study
 from harness.study.table import rows_of, write_csv, write_parquet
 
@@ -129,7 +129,8 @@ def build_outputs(out, study, summary, command, key=None):
             "headline": {s: {f: {"setting": c["row"]["setting"], "status": c["status"], "changes": c["changes"]}
                              for f, c in cells.items()} for s, cells in head["overall"].items()}}
     _render_page(out / "index.html", info=info, head=head, metrics=study["metrics"], budget=study["budget"],
-                 significance=study["significance"], alpha=ALPHA, figures=names,
+                 significance=study["significance"], methods=judging_methods(study["significance"]), alpha=ALPHA,
+                 figures=names,
                  headline_rows=headline_rows(head, study["metrics"]), budget_rows=budget_rows(head, study["metrics"]),
                  limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims])
     # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output

@@ -12,7 +12,9 @@ A study file is TOML, typed by :class:`StudyFile` (``extra = "forbid"``: an unkn
   ``calibration.json`` beside it (when there) gives the in-sample and held-out errors;
 * ``[budget]``: the real-time budgets of the headline table (``grid`` N and the ``steps`` K);
 * ``metrics``: the headline table's metrics; ``significance``: those judged as paired differences
-  (delta-method metrics only: :data:`harness.metrics.uncertainty.GRADIENTS`);
+  (:func:`harness.metrics.uncertainty.paired_difference`: the delta method for the metrics with a
+  gradient, :data:`harness.metrics.uncertainty.GRADIENTS`; parametric resampling of the reference
+  for the others, such as ``flip``, at 2 x 16 evaluations of the metric per comparison);
 * ``[[twins]]``: index-matched / dielectric scene pairs for the boundary decomposition.
 
 :func:`load_study` validates it and resolves it into the sweep's products. Every bad value is one
@@ -27,7 +29,6 @@ from pydantic import Field
 
 from harness.errors import InputError
 from harness.metrics import METRICS
-from harness.metrics.uncertainty import GRADIENTS
 from harness.regression.nightly import _split_methods
 from harness.runs.params import any_product_model, check_methods, check_products, product_dict
 from harness.scene import list_scenes
@@ -62,7 +63,7 @@ class StudyFile(InputModel):
     budget: Budget = Field(default_factory=Budget)
     metrics: Annotated[list[Literal[tuple(METRICS)]], Field(min_length=1)] = Field(
         ["relmse", "flip", "energy_ratio"], description="the headline metrics (subsurface image)")
-    significance: list[Literal[tuple(GRADIENTS)]] = Field(
+    significance: list[Literal[tuple(METRICS)]] = Field(
         ["relmse", "energy_ratio"], description="metrics judged as paired differences against the best")
     products: Annotated[list[any_product_model("cli")], Field(min_length=1)] = Field(
         ..., description="parameter grids, as the nightly matrix's tables")

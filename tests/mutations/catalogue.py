@@ -507,4 +507,9 @@ MUTATIONS = (
              "    if not lines:\n        return None\n",
              ("tests/test_benchmark_pages.py",),
              "benchmark pages: a page typed by hand, without the writer's first line, is taken for a benchmark's"),
+    Mutation("study_flip_significance_dropped", "metric", "harness/study/headline.py",
+             "            for m in significance:\n",
+             "            for m in [x for x in significance if x != \"flip\"]:\n",
+             ("tests/test_study.py::test_flip_significance_is_judged_by_resampling",),
+             "study: a FLIP difference far beyond the reference's noise is never judged, so the cell reads tied"),
 )
