@@ -17,6 +17,7 @@ It writes a TOML file that ``--mapping calibrated:PATH`` reads here::
     inject_offset = 0.0
     precision = "fp32"
     eta2 = false
+    phase_scaling = "none"                # optional: "none" when left out
     [fit]                                 # how it was fitted (free-form provenance)
     loss = "mean over scenes of log relMSE(subsurface)"
     [[budget]]
@@ -61,7 +62,7 @@ PREFIX = "calibrated:"
 #: Renderer settings (``SSLPVParams`` fields) that change the subsurface image and so the
 #: fitted scales, with their types: a calibrated file records each, a render must match it.
 SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
-            "inject_offset": float, "precision": str, "eta2": bool}
+            "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 
@@ -154,6 +155,7 @@ class _Settings(InputModel):
     inject_offset: Annotated[float, Field(examples=[0.0])]
     precision: Annotated[str, Field(examples=["fp32"])]
     eta2: Annotated[bool, Field(examples=[False])]
+    phase_scaling: Annotated[str, Field(examples=["none"])] = "none"     # files that predate it: the paper's
 
 
 class _Budget(InputModel):

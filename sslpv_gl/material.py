@@ -47,6 +47,10 @@ Parameters of :func:`lpv_material`
    * - ``sigma_scale``
      - ``1.0``
      - multiplies the mapped ``sigma_lpv`` (a calibrated free parameter)
+   * - ``phase_scaling``
+     - ``"none"``
+     - ``"none"`` (the paper) or ``"delta-eddington"`` (:func:`delta_eddington`,
+       applied to the resampled medium before the mapping)
 
 Mappings
 --------
@@ -71,6 +75,20 @@ Mappings
     the most isotropic lattice; the medium's ``g`` enters only through
     ``sigma_t'``). It is the only mapping with a ``radiance_scale`` other
     than 1 (Eq. (21)).
+
+Forward-peaked media: delta-Eddington scaling
+---------------------------------------------
+The lattice's Eq. 3 carries the phase function through one band-1 factor, which a
+forward-peaked lobe (g -> 1) does not fit. ``phase_scaling = "delta-eddington"`` treats the
+forward peak as unscattered light (Joseph, Wiscombe & Weinman 1976, Eq. 2-5): with
+``f = g^2``,
+
+    sigma_t* = sigma_t (1 - a f),   a* = a (1 - f) / (1 - a f),   g* = (g - f) / (1 - f) = g / (1 + g),
+
+which keeps the absorption ``sigma_a`` and the reduced scattering ``sigma_s (1 - g)`` (so the
+``diffusion`` mapping, which depends on them only, is unchanged) and moves the rest into the
+unscattered beam. It is applied where ``g > 0`` only (a backward lobe has no forward peak to
+remove). Limit: f = g^2 matches the HG phase function's second moment, not its whole lobe.
 
 Resampling (medium grid -> LPV grid)
 ------------------------------------
@@ -113,6 +131,8 @@ __all__ = [
     "map_material",
     "map_material_full",
     "lpv_material",
+    "PHASE_SCALINGS",
+    "delta_eddington",
 ]
 
 
@@ -261,8 +281,23 @@ def map_material_full(sigma_t, albedo, g, dx, mapping="collision"):
 OUTSIDE_MODES = boundary.OUTSIDE_MODES
 
 
+#: ``phase_scaling`` choices of :func:`lpv_material`.
+PHASE_SCALINGS = ("none", "delta-eddington")
+
+
+def delta_eddington(sigma_t, albedo, g):
+    """``(sigma_t*, albedo*, g*)``: delta-Eddington scaling with ``f = g^2`` where ``g > 0`` (module docstring)."""
+    st, a, g = (np.asarray(v, dtype=np.float64) for v in (sigma_t, albedo, g))
+    f = np.where(g > 0.0, g * g, 0.0)
+    keep = 1.0 - a * f                               # the share of sigma_t that stays an interaction
+    st_s = st * keep
+    a_s = _ratio(a * (1.0 - f), keep, 0.0)
+    g_s = np.where(g > 0.0, g / (1.0 + np.maximum(g, 0.0)), g)
+    return st_s, a_s, g_s
+
+
 def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum", eta=1.0,
-                 sigma_scale=1.0, resampled=None):
+                 sigma_scale=1.0, resampled=None, phase_scaling="none"):
     """LPV material grids for Sec. 3.2 -> dict of float32 (N, N, N, 3).
 
     Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``),
@@ -276,9 +311,13 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     sets the extrapolation distance of ``extrapolated``; ``sigma_scale``
     multiplies the mapped ``sigma_lpv`` (a calibrated free parameter,
     :mod:`sslpv_gl.calibrated`); ``resampled`` is ``resample_medium(medium, N,
-    resample)`` when the caller already has it. Other parameters: the module docstring.
+    resample)`` when the caller already has it; ``phase_scaling`` one of :data:`PHASE_SCALINGS`.
+    Other parameters: the module docstring.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
+    if phase_scaling not in PHASE_SCALINGS:
+        raise InputError("phase_scaling", "phase_scaling", f"unknown phase_scaling {phase_scaling!r}",
+                         "use one of: " + ", ".join(PHASE_SCALINGS))
     _check_choice(resample, RESAMPLERS, "resample")
     _check_choice(outside, OUTSIDE_MODES, "outside")
     medium = getattr(medium, "medium", medium)       # accept a Scene too
@@ -295,6 +334,8 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     dx = float(dxs[0])
 
     sigma_t, albedo, g_medium = resampled if resampled is not None else resample_medium(medium, N, resample)
+    if phase_scaling == "delta-eddington":
+        sigma_t, albedo, g_medium = delta_eddington(sigma_t, albedo, g_medium)
     mapped = map_material_full(sigma_t, albedo, g_medium, dx, mapping)
     sigma_lpv, g = mapped["sigma_lpv"], mapped["g"]
     if sigma_scale != 1.0:

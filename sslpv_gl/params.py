@@ -16,7 +16,7 @@ from harness.errors import InputError
 
 from .boundary import OUTSIDE_MODES
 from .calibrated import load_calibrated, parse_mapping
-from .material import MAPPINGS, RESAMPLERS
+from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS
 
 __all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES"]
 
@@ -55,6 +55,8 @@ class SSLPVParams:
     resample: str = _p("box", "medium grid -> LPV grid resampling: box average or point (trilinear)")
     outside: str = _p("vacuum", "LPV cells outside the mesh: vacuum (the paper), material, absorb, extrapolated "
                                   "or interior (no light moves between two outside cells; sslpv_gl.boundary)")
+    phase_scaling: str = _p("none", "forward-peaked media: none (the paper) or delta-eddington (the forward peak "
+                                    "f = g^2 treated as unscattered; sslpv_gl.material)")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
     skip: int = _p(2, "first propagation steps not accumulated (paper Sec. 4: 2), in [0, steps]")
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")
@@ -96,6 +98,7 @@ class SSLPVParams:
             choice("mapping", tuple(MAPPINGS) + ("calibrated:PATH",))
         choice("resample", tuple(RESAMPLERS))
         choice("outside", OUTSIDE)
+        choice("phase_scaling", PHASE_SCALINGS)
         choice("lookup", LOOKUPS)
         choice("precision", PRECISIONS)
         off = self.inject_offset

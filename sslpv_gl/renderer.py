@@ -203,7 +203,8 @@ class SSLPVRenderer:
         """
         res = params.resolved()
         eta = float(scene.boundary.eta)
-        key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta)
+        key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta,
+               params.phase_scaling)
         mat = self._material_cache.get(key)
         if mat is None:
             med = scene.medium
@@ -217,7 +218,7 @@ class SSLPVRenderer:
                 _put(self._geometry_cache, geo_key, geo, 4)
             inside, resampled = geo
             mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
-                               sigma_scale=res.sigma_scale, resampled=resampled)
+                               sigma_scale=res.sigma_scale, resampled=resampled, phase_scaling=params.phase_scaling)
             mat["inside"] = inside
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.
             _put(self._material_cache, key, mat, 8)
