@@ -8,7 +8,7 @@ mapping, K = 32 and ``steady``, with ``phase_scaling = none`` (the paper) and ``
 against the reference over its comparison mask, with the reference's noise floor. The
 ``diffusion`` mapping depends only on the quantities the scaling keeps: its two rows must agree.
 
-    python benchmarks/forward_scattering.py [--grid 32] [--size 32] [--write]
+    python benchmarks/forward_scattering.py [--grid 32] [--size 32] [--outside vacuum] [--write]
 
 Limits: two media, one light each; the forward sphere's reference is rendered at a small size
 (its noise floor is printed beside it).
@@ -66,12 +66,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grid", type=int, default=32)
     ap.add_argument("--size", type=int, default=32, help="the forward sphere's reference size")
+    ap.add_argument("--outside", default="vacuum", help="SSLPV's outside mode (sslpv_gl.boundary)")
     args = ap.parse_args(argv)
     cases = [("mixed_phase", small_scene("mixed_phase"), *load_case_reference(small_scene("mixed_phase")))]
     fwd = forward_scene(args.size)
     cases.append(("forward sphere (g = 0.9)", fwd, *reference(fwd, args.size)))
     renderer = SSLPVRenderer()
-    print(f"GL renderer: {renderer.gl_renderer}; N = {args.grid}; subsurface energy ratio / relMSE against the "
+    print(f"GL renderer: {renderer.gl_renderer}; N = {args.grid}, outside = {args.outside}; subsurface energy ratio / relMSE against the "
           "reference (its noise floor in relMSE beside the scene)\n")
     print("| scene | noise floor | mapping | K | none | delta-eddington |")
     print("|---|---|---|---|---|---|")
@@ -80,7 +81,7 @@ def main(argv=None):
             for k in (32, "steady"):
                 cells = []
                 for scaling in ("none", "delta-eddington"):
-                    p = SSLPVParams(N=args.grid, steps=k, mapping=mapping, phase_scaling=scaling,
+                    p = SSLPVParams(N=args.grid, steps=k, mapping=mapping, phase_scaling=scaling, outside=args.outside,
                                     **({"skip": 0} if mapping == "diffusion" else {}))
                     res = renderer.render(scene, p)
                     e = compute("energy_ratio", res.subsurface, ref["subsurface"], ref["mask"]).value
@@ -95,5 +96,8 @@ if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
     from page import run
 
-    raise SystemExit(run(main, "forward_scattering", "Forward-peaked media: delta-Eddington scaling against the truth",
+    def page_name(argv):
+        return "forward_scattering" + (f"_{argv[argv.index('--outside') + 1]}" if "--outside" in argv[:-1] else "")
+
+    raise SystemExit(run(main, page_name, "Forward-peaked media: delta-Eddington scaling against the truth",
                          markdown=True))
