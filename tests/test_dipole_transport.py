@@ -7,7 +7,8 @@ a pencil beam of unit power into an index-matched half-space, isotropic scatteri
 The regime: reduced albedo 0.999, exit points 12 to 24 reduced mean free paths from the point of entry
 (one annulus), normal incidence for the standard dipole (it ignores the direction of incidence), normal and
 60 degree incidence for the directional dipole. There the exitance of each kernel, averaged over the annulus
-(``bin_mean``; ``R_d`` for the standard dipole, ``pi S_d`` for the directional one), must lie within
+(``bin_mean``; ``R_d`` for the standard dipole, ``pi S_d`` for the directional one), over the walk's exitance of
+scattering orders >= 2, must lie within
 ``DELTA`` = 5 % of the walk's plus 4.5 of the walk's standard errors. 5 % is the accuracy this test claims for
 diffusion theory there; ``benchmarks/kernel_transport.py`` measures the departures with many more photons
 (``docs/benchmarks/kernel_transport.md``), and everywhere else (near the source, lower albedo, the sectors
@@ -61,7 +62,7 @@ def directional(m, theta_deg):
 
 
 def check(kernel, walk, what):
-    value, se = walk.exitance("all")
+    value, se = walk.exitance("multiple")          # the dipoles model orders >= 2 (order 1 is < 1e-5 of it here)
     model = rw.bin_mean(kernel, EDGES)
     ratio, rel_se = model / value, se / value
     print(f"{what}: kernel / walk = {ratio[0]:.4f} +- {rel_se[0]:.4f}")
