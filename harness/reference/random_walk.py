@@ -29,7 +29,8 @@ uses diffusion theory, Mitsuba or the kernels.
      - scattering events after which a photon still inside is given up (counted in
        :attr:`Walk.unfinished`, a bound on the bias); default 100,000
 
-The walk (Wang, Jacques & Zheng's MCML scheme without layers or Fresnel):
+The walk (the scheme of Wang, Jacques & Zheng's MCML, 1995, reduced to one index-matched layer, with
+analog absorption in place of MCML's implicit capture and roulette):
 
 * **Geometry.** The medium fills ``z < 0``; the surface ``z = 0`` is index-matched (the outside
   has the medium's refractive index), so nothing is reflected or refracted there: a photon that
