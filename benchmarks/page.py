@@ -212,12 +212,13 @@ def run(main, name, title, markdown=False):
     in place of ``main()``. ``--write`` (taken off the arguments before ``main`` parses them) writes
     the page; the page is written only when ``main`` returns 0 or None, so a failed run leaves the
     committed page as it was. The command on the page is the one run, without ``--write``.
-    ``name`` may be a function of the arguments (a benchmark in parts: one page per part).
+    ``name`` and ``title`` may be functions of the arguments (a benchmark in parts: one page per part).
     """
     argv = list(sys.argv)
     write = "--write" in argv[1:]
     sys.argv = [a for a in argv if a != "--write"]
     name = name(sys.argv[1:]) if callable(name) else name
+    title = title(sys.argv[1:]) if callable(title) else title
     if any(a in ("-h", "--help") for a in argv[1:]):
         print(f"--write: also write docs/benchmarks/{name}.md (benchmarks/page.py)\n")
         return main()

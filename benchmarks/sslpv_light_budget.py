@@ -453,4 +453,12 @@ def main(argv=None):
 if __name__ == "__main__":
     from page import run
 
-    raise SystemExit(run(main, _page_name, "Where SSLPV's light goes"))
+    parts = {"outside": "light in the cells outside the mesh", "gap": "steps not yet converged",
+             "refine": "grid refinement", "bypass": "light that bypasses the object",
+             "backlit": "the back-lit deficit", "all": "outside, gap and refine"}
+
+    def title(argv):
+        part = "refine" if "--merge" in argv else _page_name(argv).removeprefix("sslpv_light_budget_")
+        return f"Where SSLPV's light goes: {parts.get(part.removesuffix('_merged'), part)}"
+
+    raise SystemExit(run(main, _page_name, title))
