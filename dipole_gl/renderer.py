@@ -134,6 +134,7 @@ class DipoleRenderer:
         self._targets = Targets(self.ctx)
         self._scene_key = None
         self._scene_cache = {}
+        self._last_single = None                 # the single stage's read-backs of the last render (debug)
         with self.ctx:
             warm_up_queries(self.ctx)
 
@@ -286,7 +287,7 @@ class DipoleRenderer:
             info.update(samples=points.count, spacing=spacing * mat.mfp, spacing_used=spacing, dispatches=dispatches)
             if debug:
                 if params.terms == "both":
-                    dbg["single"] = s1
+                    dbg["single_pass"] = self._last_single
                 dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
                            samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
@@ -317,7 +318,7 @@ class DipoleRenderer:
                 s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[1],
                                   out.textures[0], add=True)
                 if debug:
-                    dbg["single"] = s1
+                    dbg["single_pass"] = self._last_single
             full = gbuffer.read(out.textures[0], W, H)
             sub = gbuffer.read(out.textures[1], W, H)
             mask = sub[..., 3] > 0.5
@@ -358,8 +359,11 @@ class DipoleRenderer:
         work["single"] = int(covered.sum()) * single.N_MARCH * len(scene.lights)
         gview = {"position": gbuffer.read(gb.textures[0], W, H)[..., :3],
                  "normal": gbuffer.read(gb.textures[1], W, H)[..., :3], "mask": covered}
+        atlas_host = single.read_atlas(atlas)
         info["single"] = check.check_single(scene, self._material(scene, info["kernel"])[0].value, views, s,
-                                            single.read_atlas(atlas), gview, s1[..., :3])
+                                            atlas_host, gview, s1[..., :3])
+        self._last_single = {"atlas": atlas_host, "views": views, "position": gview["position"],
+                             "normal": gview["normal"], "mask": covered, "single": s1[..., :3]}
         return s1[..., :3]
 
     def _render_single_only(self, scene, params, mat, medium, views, shadow_tex, centre, radius, timer, work, info,
@@ -379,8 +383,7 @@ class DipoleRenderer:
         sub = gbuffer.read(out.textures[0], W, H)
         full = gbuffer.read(out.textures[1], W, H)
         if dbg is not None:
-            dbg.update(single=s1, position=gbuffer.read(gb.textures[0], W, H)[..., :3],
-                       normal=gbuffer.read(gb.textures[1], W, H)[..., :3])
+            dbg.update(self._last_single)
         return DipoleResult(
             full=np.ascontiguousarray(full[..., :3]), subsurface=np.ascontiguousarray(sub[..., :3]),
             mask=sub[..., 3] > 0.5, timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work,

@@ -64,7 +64,7 @@ def iterations(n_lights, n_march=N_MARCH):
 def build_program(ctx, warnings):
     prog = _sh.compute(ctx, "single.comp", {"MAX_LIGHTS": MAX_LIGHTS}, dirs=DIRS)
     _sh.check_uniforms(prog, ["u_add", "u_n_lights", "u_n_march", "u_eta", "u_cam_pos", "u_size", "u_light_pos",
-                              "u_light_I", "u_light_vp", "u_shadow_size", "u_shadow_texel", "u_gpos", "u_gnrm",
+                              "u_light_I", "u_light_vp", "u_shadow_size", "u_gpos", "u_gnrm",
                               "u_grefl", "u_atlas_pos", "u_atlas_nrm", "u_sp", "u_sa", "u_st", "u_bbox_min",
                               "u_bbox_size", "u_res"], "single", warnings)
     for unit, name in enumerate(("u_sp", "u_sa", "u_st")):

@@ -99,8 +99,7 @@ def single_scattering(exit_pos, exit_nrm, cam_pos, atlas, views, lights, mat, et
         cos_i = np.sum(wi * n_i, axis=1)
         ok &= cos_i > 0.0
         s_i = dist - d_i
-        texel = np.float32(2.0 * view.tan_half / size)
-        ok &= s_i >= -2.0 * texel * d_i / np.maximum(cos_i, 0.2)
+        ok &= s_i >= 0.0                                        # x in front of the lit surface: outside
         s_i = np.maximum(s_i, 0.0)
         c = np.where(ok, cos_i, 1.0)
         cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / eta**2, 0.0))

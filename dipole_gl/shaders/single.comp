@@ -37,7 +37,6 @@ uniform vec3  u_light_pos[MAX_LIGHTS];
 uniform vec3  u_light_I[MAX_LIGHTS];
 uniform mat4  u_light_vp[MAX_LIGHTS];
 uniform int   u_shadow_size;                    // atlas tile size in texels
-uniform float u_shadow_texel[MAX_LIGHTS];       // world size of a texel at unit distance
 
 // Henyey-Greenstein, per colour; cos_t between the light's and the scattered travel directions.
 vec3 hg(float cos_t, vec3 g)
@@ -78,9 +77,7 @@ vec3 light_term(int l, vec3 x, vec3 back, vec3 ss, vec3 st, vec3 g)
     float cos_i = dot(wi, ni);
     if (cos_i <= 0.0) return vec3(0.0);
     float s_i = dist - d_i;
-    // x in front of the lit surface (outside the object), beyond the atlas's resolution
-    if (s_i < -2.0 * u_shadow_texel[l] * d_i / max(cos_i, 0.2)) return vec3(0.0);
-    s_i = max(s_i, 0.0);
+    if (s_i < 0.0) return vec3(0.0);                          // x in front of the lit surface: outside
     float eta2 = u_eta * u_eta;
     float cos_t = sqrt(max(1.0 - (1.0 - cos_i * cos_i) / eta2, 0.0));
     float sp_i = s_i * cos_i / cos_t;                         // Jensen's s'_i
