@@ -104,7 +104,8 @@ def single_scattering(exit_pos, exit_nrm, cam_pos, atlas, views, lights, mat, et
         c = np.where(ok, cos_i, 1.0)
         cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / eta**2, 0.0))
         sp_i = s_i * c / cos_t                                  # Jensen's s'_i
-        w12 = refract(np.where(ok[:, None], -wi, -n_i), np.where(ok[:, None], n_i, n_i + (n_i == 0)), eta)
+        with np.errstate(invalid="ignore", divide="ignore"):      # rows not ok are dropped below
+            w12 = refract(-wi, np.where(ok[:, None], n_i, wi), eta)
         spread = (d_i + sp_i / eta) * (d_i + sp_i * c * c / (eta * cos_t * cos_t))
         e = fresnel_transmittance(c, eta) * (c / cos_t) / spread
         cos_ph = np.sum(w12 * back, axis=1)

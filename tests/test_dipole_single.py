@@ -1,0 +1,248 @@
+"""Jensen et al. 2001's single-scattering term S^(1) (``dipole_gl/single.py``, ``single.comp``).
+
+Four routes, each independent of the one it checks:
+
+* GL against the NumPy twin (``dipole_gl/single_twin.py``) at every covered pixel of a chromatic
+  scene behind a dielectric with two lights, one on each side: ``max |GL - twin| <= 1e-4`` of the
+  largest value (float32 against float64, as ``tests/test_dipole_gl.py``);
+* GL against the closed form on a half-space under a distant light
+  (:func:`dipole_gl.single_twin.halfspace`), whose only stated approximation is the march's
+  midpoint rule: for ``int_0^1 (1 - u)^a du = 1/(1 + a)`` its relative error
+  ``|M_N(a)(1 + a) - 1|`` is computed per pixel and colour and is the tolerance, plus float32
+  (``s_i = |y - x| - d_i`` is a difference of two distances of about ``d``, each to ``2^-24 d``:
+  ``2^-23 d max(sigma_t)``, 1.5e-3 at ``d = 1000``) and the light's finite distance (the closed
+  form is a plane wave with the irradiance at the exit point, the estimator spreads the beam over
+  ``s'``: ``2 s'/d`` with ``s' <= 2/min(sigma_t)``, 5e-4);
+* GL against Mitsuba's single-scattering image (``tests/data/single``, ``benchmarks/single_refs.py``:
+  ``max_depth`` 2 index-matched, 4 through a smooth dielectric), index-matched and at ``eta = 1.3``,
+  front- and back-lit, ``g = 0.5``, 24 x 24. The ratio of the image means over the pixels two
+  pixels inside the footprint (the march does not see where the view ray leaves the object: at the
+  edge of a slab it runs on into the air, a stated limit) must satisfy
+  ``|ratio - 1| <= 3 SE + delta``: ``SE`` the standard error of the reference's mean (its seeds),
+  ``delta`` the estimator's known approximations, each bounded here by refining it: the march
+  (64 against 256 nodes, twin), the light atlas (1024^2 against 2048^2 texels), the pixel (GL
+  shades the pixel centre, Mitsuba averages the footprint: against 2 x 2 centres per pixel), and at
+  ``eta != 1`` the straight line to the light (:func:`flat_exact`: the same estimator with the true
+  refraction point on the slab's plane and the medium ending at the slab's far face);
+* the loop budget: one invocation's march x lights x taps stays under ``ITERATION_BUDGET``.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dipole_gl import budget, single, single_twin
+from dipole_gl.glsl import MAX_LIGHTS
+from dipole_gl.medium import scene_material
+from dipole_gl.params import DipoleParams
+from sslpv_gl.optics import fresnel_transmittance, refract
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import single_refs  # noqa: E402
+
+DATA = Path(__file__).resolve().parent / "data" / "single"
+#: The validation cases the test judges (``slab_front_eta1``, a thin slab lit from the camera's side,
+#: shows the march's limit on the benchmark page; ``sphere_front_eta13`` has no flat-interface bound).
+MITSUBA_CASES = ("sphere_front_eta1", "slab_back_eta1", "thick_front_eta1", "slab_back_eta13", "thick_front_eta13")
+
+
+def test_march_within_loop_budget():
+    assert single.iterations(MAX_LIGHTS) <= budget.ITERATION_BUDGET
+
+
+def _scene_two_lights():
+    from harness.scene.load import PointLight, scene_hash
+    import dataclasses
+
+    sc = single_refs.case_scene("slab_back_eta13")
+    m = sc.medium
+    g = np.broadcast_to(np.array([0.5, 0.3, -0.2], np.float32), m.g.shape).copy()
+    st = np.broadcast_to(np.array([6.0, 8.0, 11.0], np.float32), m.sigma_t.shape).copy()
+    sc = sc.with_medium(g=g, sigma_t=st).with_resolution(16, 16)
+    lights = sc.lights + (PointLight((0.7, -0.4, 2.6), (3.0, 4.0, 5.0)),)
+    sc = dataclasses.replace(sc, lights=lights, content_hash="")
+    return dataclasses.replace(sc, content_hash=scene_hash(sc))
+
+
+@pytest.mark.gl
+def test_gl_matches_twin(dipole_renderer):
+    sc = _scene_two_lights()
+    res = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
+    d = res.debug
+    m = d["mask"]
+    assert m.sum() > 100
+    twin = single_twin.single_scattering(d["position"][m], d["normal"][m], sc.camera.origin, d["atlas"], d["views"],
+                                         sc.lights, scene_material(sc), sc.boundary.eta, 1024)
+    gl = d["single"][m]
+    assert np.abs(gl - twin).max() <= 1e-4 * np.abs(twin).max()
+    assert np.all(twin.max(axis=0) > 0)
+    assert np.array_equal(res.subsurface, d["single"])              # terms = single: S1 alone
+
+
+@pytest.mark.gl
+def test_both_adds_single_to_the_gathers(dipole_renderer):
+    """``terms = both`` is the ``diffusion`` image plus S^(1), for either gather."""
+    sc = _scene_two_lights()
+    for kw in ({"gather": "dense", "spacing": 2.0}, {"gather": "vertex", "density": 0.5, "range": 2.0}):
+        diff = dipole_renderer.render(sc, "dipole", DipoleParams(terms="diffusion", **kw)).subsurface
+        both = dipole_renderer.render(sc, "dipole", DipoleParams(terms="both", **kw), debug=True)
+        s1 = both.debug["single_pass"]["single"]
+        assert np.abs(both.subsurface - (diff + s1)).max() <= 1e-5 * np.abs(both.subsurface).max()
+        assert both.info["single"]["max_rel_diff"] <= 1e-4
+
+
+def _halfspace_scene(eta, light_dir, dist=1000.0):
+    import dataclasses
+
+    from harness.scene.load import Boundary, PointLight, scene_hash
+
+    sc = single_refs.case_scene("thick_front_eta1").with_resolution(16, 16)
+    mesh = dataclasses.replace(sc.mesh, vertices=sc.mesh.vertices * np.array([3.0, 3.0, 10.0 / 3.0]))
+    m = sc.medium
+    st = np.broadcast_to(np.array([8.0, 10.0, 13.0], np.float32), m.sigma_t.shape).copy()
+    g = np.broadcast_to(np.array([0.5, 0.0, -0.3], np.float32), m.g.shape).copy()
+    sc = sc.with_medium(sigma_t=st, g=g)
+    w = np.asarray(light_dir, float) / np.linalg.norm(light_dir)
+    light = PointLight(tuple(w * dist), (dist**2, dist**2, dist**2))       # irradiance about 1 at the slab
+    b = Boundary("index-matched") if eta == 1.0 else Boundary("dielectric", eta=eta, roughness=0.0)
+    sc = dataclasses.replace(sc, mesh=mesh, lights=(light,), boundary=b, content_hash="")
+    return dataclasses.replace(sc, content_hash=scene_hash(sc)), w
+
+
+def _midpoint_error(a, n=single.N_MARCH):
+    """Relative error of the march's midpoint rule for ``int_0^1 (1 - u)^a du = 1/(1 + a)``."""
+    u = (np.arange(n) + 0.5) / n
+    return np.abs(np.mean((1.0 - u)[None, :] ** a[..., None], axis=-1) * (1.0 + a) - 1.0)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("eta", [1.0, 1.3])
+def test_halfspace_closed_form(dipole_renderer, eta):
+    sc, w = _halfspace_scene(eta, (0.5, 0.3, 1.0))
+    res = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
+    d = res.debug
+    pos = d["position"]
+    inner = d["mask"] & np.all(np.abs(pos[..., :2]) < 1.5, axis=-1) & (d["normal"][..., 2] > 0.99)
+    assert inner.sum() > 100
+    xo = pos[inner]
+    n = np.array([0.0, 0.0, 1.0])
+    wo = np.asarray(sc.camera.origin) - xo
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    mat = scene_material(sc)
+    ss, st, g = single_twin.exit_material(mat, xo, np.broadcast_to(n, xo.shape))
+    cos_v, cos_l = wo @ n, np.full(len(xo), w @ n)
+    dv = refract(-wo, np.broadcast_to(n, xo.shape), eta)
+    dl = refract(np.broadcast_to(-w, xo.shape), np.broadcast_to(n, xo.shape), eta)
+    cos_ph = np.sum(dl * -dv, axis=1)
+    irr = sc.lights[0].intensity[0] / np.sum((np.asarray(sc.lights[0].position) - xo) ** 2, axis=1)
+    exact = single_twin.halfspace(ss, st, g, eta, cos_v[:, None], cos_l[:, None], cos_ph[:, None], irr[:, None])
+    # the march's nodes in u for sigma_ref: (1 - u)^a with a = (sigma_t - sigma_ref + sigma_t mu_o'/mu_i') / sigma_ref
+    mo = -dv @ -n
+    mi = -dl @ -n
+    sref = st.min(axis=1, keepdims=True)
+    a = (st - sref + st * (mo / mi)[:, None]) / sref
+    dist = np.linalg.norm(sc.lights[0].position)
+    tol = _midpoint_error(a) + 2.0**-23 * dist * st.max() + 4.0 / (st.min() * dist)
+    rel = np.abs(d["single"][inner] / exact - 1.0)
+    assert np.all(rel <= tol), f"worst {rel.max():.3g} against {tol[np.unravel_index(rel.argmax(), rel.shape)]:.3g}"
+    assert np.all(fresnel_transmittance(cos_v, eta) <= 1.0)
+
+
+# ----------------------------------------------------------------- against Mitsuba
+
+def flat_exact(xo, cam, plane_z, outward, scene, mat, n_march=256):
+    """S^(1) at exit points ``xo`` on a slab's face: the estimator with the true refraction point.
+
+    The light ``y`` reaches ``x`` through the point of the plane ``z = plane_z`` (outward normal
+    ``(0, 0, outward)``) where Snell's law holds (bisection on the horizontal distance), with the
+    flat interface's irradiance, phase angle and path ``s'`` of that point; nodes beyond the slab's
+    other face (the view ray has left the medium) give nothing. Same march (``n_march`` nodes).
+    """
+    eta = float(scene.boundary.eta)
+    zf, zb = scene.mesh.vertices[:, 2].max(), scene.mesh.vertices[:, 2].min()
+    n_o = np.array([0.0, 0.0, 1.0])
+    wo = np.asarray(cam, float) - xo
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    d = refract(-wo, np.broadcast_to(n_o, xo.shape), eta)
+    ss, st, g = single_twin.exit_material(mat, xo, np.broadcast_to(n_o, xo.shape))
+    sref = st.min(axis=1)
+    u = (np.arange(n_march) + 0.5) / n_march
+    s = -np.log(1.0 - u)[None, :] / sref[:, None]
+    wk = np.exp(-(st[:, None, :] - sref[:, None, None]) * s[..., None]) / (n_march * sref[:, None, None])
+    x = xo[:, None, :] + s[..., None] * d[:, None, :]
+    inside = (x[..., 2] <= zf + 1e-9) & (x[..., 2] >= zb)
+    acc = np.zeros(x.shape[:2] + (3,))
+    for light in scene.lights:
+        y = np.asarray(light.position, float)
+        h = np.abs(y[2] - plane_z)
+        z = np.abs(x[..., 2] - plane_z)
+        hv = x[..., :2] - y[:2]
+        delta = np.linalg.norm(hv, axis=-1)
+        lo, hi = np.zeros_like(delta), delta.copy()
+        for _ in range(60):                                   # a/|ye| = eta (delta - a)/|ex|
+            a = 0.5 * (lo + hi)
+            f = a / np.hypot(a, h) - eta * (delta - a) / np.hypot(delta - a, z)
+            lo, hi = np.where(f < 0, a, lo), np.where(f < 0, hi, a)
+        a = 0.5 * (lo + hi)
+        unit = hv / np.where(delta > 0, delta, 1.0)[..., None]
+        e = np.concatenate([y[:2] + a[..., None] * unit, np.full(a.shape + (1,), plane_z)], axis=-1)
+        d_e = np.linalg.norm(e - y, axis=-1)
+        sp = np.linalg.norm(x - e, axis=-1)
+        cos_e, cos_t = h / d_e, np.where(sp > 0, z / np.where(sp > 0, sp, 1.0), 1.0)
+        lit = (np.sign(y[2] - plane_z) == outward) & inside
+        spread = (d_e + sp / eta) * (d_e + sp * cos_e**2 / (eta * cos_t**2))
+        E = fresnel_transmittance(cos_e, eta) * (cos_e / cos_t) / spread
+        w12 = (x - e) / np.where(sp > 0, sp, 1.0)[..., None]
+        cos_ph = np.sum(w12 * -d[:, None, :], axis=-1)
+        term = np.asarray(light.intensity)[None, None] * E[..., None] * ss[:, None] * \
+            single_twin.hg(cos_ph[..., None], g[:, None]) * np.exp(-st[:, None] * sp[..., None])
+        acc += np.where(lit[..., None], term, 0.0)
+    out = np.einsum("pkc,pkc->pc", wk, acc)
+    return out * (fresnel_transmittance(wo @ n_o, eta) / eta**2)[:, None]
+
+
+def _inner(mask, coverage):
+    from scipy.ndimage import binary_erosion
+
+    return binary_erosion(mask & (coverage >= 1.0), np.ones((5, 5), bool))
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("case", MITSUBA_CASES)
+def test_against_mitsuba_single_scattering(dipole_renderer, case):
+    ref = np.load(DATA / f"{case}.npz")
+    sc = single_refs.case_scene(case)
+    res = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
+    d = res.debug
+    sel = _inner(res.mask, ref["coverage"])
+    assert sel.sum() >= 100
+    m_ref = ref["mean"][sel].mean()
+    se = np.sqrt(np.sum(ref["se"][sel] ** 2)) / sel.sum() / m_ref      # of the ratio, from the seeds
+    m_gl = res.subsurface[sel].mean()
+    mat = scene_material(sc)
+    # the march: 64 nodes against 256 (twin)
+    args = (d["position"][sel], d["normal"][sel], sc.camera.origin, d["atlas"], d["views"], sc.lights, mat,
+            sc.boundary.eta, 1024)
+    fine = single_twin.single_scattering(*args, n_march=256).mean()
+    delta_march = abs(single_twin.single_scattering(*args).mean() / fine - 1.0)
+    # the light atlas: 1024^2 against 2048^2 texels
+    a2 = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single", shadow_size=2048))
+    delta_atlas = abs(m_gl / a2.subsurface[sel].mean() - 1.0)
+    # the pixel: its centre against the mean of 2 x 2 centres inside it
+    W, H = sc.camera.width, sc.camera.height
+    sup = dipole_renderer.render(sc.with_resolution(2 * W, 2 * H), "dipole", DipoleParams(terms="single"))
+    box = sup.subsurface.reshape(H, 2, W, 2, 3).mean(axis=(1, 3))
+    delta_pixel = abs(m_gl / box[sel].mean() - 1.0)
+    delta_geom = 0.0
+    if sc.boundary.eta != 1.0:                           # the straight line to the light (flat slabs only)
+        zf, zb = sc.mesh.vertices[:, 2].max(), sc.mesh.vertices[:, 2].min()
+        front = sc.lights[0].position[2] > zf
+        exact = flat_exact(d["position"][sel], sc.camera.origin, zf if front else zb, 1 if front else -1, sc, mat)
+        delta_geom = abs(fine / exact.mean() - 1.0)
+    tol = 3.0 * se + delta_march + delta_atlas + delta_pixel + delta_geom
+    ratio = m_gl / m_ref
+    assert abs(ratio - 1.0) <= tol, (f"{case}: GL / Mitsuba = {ratio:.4f}, tolerance {tol:.4f} = 3 x SE {se:.4f} + "
+                                     f"march {delta_march:.4f} + atlas {delta_atlas:.4f} + pixel {delta_pixel:.4f} + "
+                                     f"straight line {delta_geom:.4f}")
