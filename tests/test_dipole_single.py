@@ -93,6 +93,19 @@ def test_both_adds_single_to_the_gathers(dipole_renderer):
         assert both.info["single"]["max_rel_diff"] <= 1e-4
 
 
+@pytest.mark.gl
+@pytest.mark.parametrize("gather", ["dense", "vertex"])
+def test_a_wrong_single_result_is_refused(dipole_renderer, monkeypatch, gather):
+    """The render's check covers S^(1): a twin off by 1 % (ten times ``CHECK_RTOL``) refuses the result."""
+    from harness.errors import ResultRefused
+
+    real = single_twin.single_scattering
+    monkeypatch.setattr(single_twin, "single_scattering", lambda *a, **k: 1.01 * real(*a, **k))
+    kw = {"spacing": 3.0} if gather == "dense" else {"density": 0.25, "range": 2.0}
+    with pytest.raises(ResultRefused, match="single scattering: the GL result disagrees"):
+        dipole_renderer.render(_scene_two_lights(), "dipole", DipoleParams(gather=gather, **kw))
+
+
 def _halfspace_scene(eta, light_dir, dist=1000.0):
     import dataclasses
 
