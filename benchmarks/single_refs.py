@@ -15,6 +15,9 @@ a refraction one, :mod:`harness.reference.mnee`): index-matched ``volpath`` with
 A case is a suite scene with its medium made grey (``sigma_t``, ``albedo``) and ``g = 0.5``,
 its boundary index-matched or a smooth dielectric of ``eta = 1.3``, its light in front of or
 behind the object, a slab possibly made thicker, at :data:`SIZE` (:func:`case_scene`).
+:func:`compare_case` measures GL's S^(1) against a case's image and bounds the estimator's known
+approximations (``tests/test_dipole_single.py`` asserts it, ``benchmarks/single_scattering.py`` tabulates it);
+:func:`flat_exact` is the estimator with the true refraction point on a slab.
 """
 
 from __future__ import annotations
@@ -85,6 +88,118 @@ def check_depths(scene, spp=16):
     """Mean image at ``single_depth - 1``, ``single_depth`` and ``+ 1`` (the first must be 0)."""
     d = single_depth(scene)
     return [float(render_single(scene, spp, 2, max_depth=k)[0].mean()) for k in (d - 1, d, d + 1)]
+
+
+def flat_exact(xo, cam, plane_z, outward, scene, mat, n_march=256):
+    """S^(1) at exit points ``xo`` on a slab's face: the estimator with the true refraction point.
+
+    The light ``y`` reaches ``x`` through the point of the plane ``z = plane_z`` (outward normal
+    ``(0, 0, outward)``) where Snell's law holds (bisection on the horizontal distance), with the
+    flat interface's irradiance, phase angle and path ``s'`` of that point; nodes beyond the slab's
+    other face (the view ray has left the medium) give nothing. Same march (``n_march`` nodes).
+    """
+    from dipole_gl import single_twin
+    from sslpv_gl.optics import fresnel_transmittance, refract
+
+    eta = float(scene.boundary.eta)
+    zf, zb = scene.mesh.vertices[:, 2].max(), scene.mesh.vertices[:, 2].min()
+    n_o = np.array([0.0, 0.0, 1.0])
+    wo = np.asarray(cam, float) - xo
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    d = refract(-wo, np.broadcast_to(n_o, xo.shape), eta)
+    ss, st, g = single_twin.exit_material(mat, xo, np.broadcast_to(n_o, xo.shape))
+    sref = st.min(axis=1)
+    u = (np.arange(n_march) + 0.5) / n_march
+    s = -np.log(1.0 - u)[None, :] / sref[:, None]
+    wk = np.exp(-(st[:, None, :] - sref[:, None, None]) * s[..., None]) / (n_march * sref[:, None, None])
+    x = xo[:, None, :] + s[..., None] * d[:, None, :]
+    inside = (x[..., 2] <= zf + 1e-9) & (x[..., 2] >= zb)
+    acc = np.zeros(x.shape[:2] + (3,))
+    for light in scene.lights:
+        y = np.asarray(light.position, float)
+        h = np.abs(y[2] - plane_z)
+        z = np.abs(x[..., 2] - plane_z)
+        hv = x[..., :2] - y[:2]
+        delta = np.linalg.norm(hv, axis=-1)
+        lo, hi = np.zeros_like(delta), delta.copy()
+        for _ in range(60):                                   # a/|ye| = eta (delta - a)/|ex|
+            a = 0.5 * (lo + hi)
+            f = a / np.hypot(a, h) - eta * (delta - a) / np.hypot(delta - a, z)
+            lo, hi = np.where(f < 0, a, lo), np.where(f < 0, hi, a)
+        a = 0.5 * (lo + hi)
+        unit = hv / np.where(delta > 0, delta, 1.0)[..., None]
+        e = np.concatenate([y[:2] + a[..., None] * unit, np.full(a.shape + (1,), plane_z)], axis=-1)
+        d_e = np.linalg.norm(e - y, axis=-1)
+        sp = np.linalg.norm(x - e, axis=-1)
+        cos_e, cos_t = h / d_e, np.where(sp > 0, z / np.where(sp > 0, sp, 1.0), 1.0)
+        lit = (np.sign(y[2] - plane_z) == outward) & inside
+        spread = (d_e + sp / eta) * (d_e + sp * cos_e**2 / (eta * cos_t**2))
+        E = fresnel_transmittance(cos_e, eta) * (cos_e / cos_t) / spread
+        w12 = (x - e) / np.where(sp > 0, sp, 1.0)[..., None]
+        cos_ph = np.sum(w12 * -d[:, None, :], axis=-1)
+        term = np.asarray(light.intensity)[None, None] * E[..., None] * ss[:, None] * \
+            single_twin.hg(cos_ph[..., None], g[:, None]) * np.exp(-st[:, None] * sp[..., None])
+        acc += np.where(lit[..., None], term, 0.0)
+    out = np.einsum("pkc,pkc->pc", wk, acc)
+    return out * (fresnel_transmittance(wo @ n_o, eta) / eta**2)[:, None]
+
+
+def inner_pixels(mask, coverage):
+    """The compared pixels: two pixels inside the fully covered footprint (the march does not see where the
+    view ray leaves the object; at a slab's edge it would run on into the air)."""
+    from scipy.ndimage import binary_erosion
+
+    return binary_erosion(mask & (coverage >= 1.0), np.ones((5, 5), bool))
+
+
+def load_reference(name):
+    """The committed Mitsuba single-scattering image of case ``name`` (``mean``, ``se``, ``coverage``)."""
+    return np.load(OUT / f"{name}.npz")
+
+
+def compare_case(renderer, name):
+    """GL's S^(1) against Mitsuba on case ``name``, with the estimator's approximations bounded by refinement.
+
+    Returns ``ratio`` (of the image means over :func:`inner_pixels`), ``se`` (its standard error from the
+    reference's seeds), the bounds ``march`` (64 against 256 nodes, twin), ``atlas`` (1024^2 against
+    2048^2 texels), ``pixel`` (the pixel centre against the mean of 2 x 2 centres) and ``line`` (at
+    ``eta != 1`` on a slab: the twin against :func:`flat_exact`; 0 otherwise), ``tolerance``
+    ``= 3 se + march + atlas + pixel + line``, ``within2``/``within3`` (the share of pixels with
+    ``|GL - ref| <= k se``), ``pixels``.
+    """
+    from dipole_gl import single_twin
+    from dipole_gl.medium import scene_material
+    from dipole_gl.params import DipoleParams
+
+    ref = load_reference(name)
+    sc = case_scene(name)
+    res = renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
+    d = res.debug
+    sel = inner_pixels(res.mask, ref["coverage"])
+    m_ref = float(ref["mean"][sel].mean())
+    se = float(np.sqrt(np.sum(ref["se"][sel].astype(np.float64) ** 2)) / sel.sum() / m_ref)
+    m_gl = float(res.subsurface[sel].mean())
+    mat = scene_material(sc)
+    args = (d["position"][sel], d["normal"][sel], sc.camera.origin, d["atlas"], d["views"], sc.lights, mat,
+            sc.boundary.eta, 1024)
+    fine = single_twin.single_scattering(*args, n_march=256).mean()
+    march = abs(single_twin.single_scattering(*args).mean() / fine - 1.0)
+    a2 = renderer.render(sc, "dipole", DipoleParams(terms="single", shadow_size=2048))
+    atlas = abs(m_gl / a2.subsurface[sel].mean() - 1.0)
+    W, H = sc.camera.width, sc.camera.height
+    sup = renderer.render(sc.with_resolution(2 * W, 2 * H), "dipole", DipoleParams(terms="single"))
+    box = sup.subsurface.reshape(H, 2, W, 2, 3).mean(axis=(1, 3))
+    pixel = abs(m_gl / box[sel].mean() - 1.0)
+    line = 0.0
+    if sc.boundary.eta != 1.0 and CASES[name][0] == "backlit_slab":      # the straight line to the light
+        zf, zb = sc.mesh.vertices[:, 2].max(), sc.mesh.vertices[:, 2].min()
+        front = sc.lights[0].position[2] > zf
+        exact = flat_exact(d["position"][sel], sc.camera.origin, zf if front else zb, 1 if front else -1, sc, mat)
+        line = abs(fine / exact.mean() - 1.0)
+    z = np.abs(res.subsurface[sel] - ref["mean"][sel]) / np.maximum(ref["se"][sel], 1e-30)
+    return {"ratio": m_gl / m_ref, "se": se, "march": float(march), "atlas": float(atlas), "pixel": float(pixel),
+            "line": float(line), "tolerance": 3.0 * se + march + atlas + pixel + line,
+            "within2": float(np.mean(z <= 2.0)), "within3": float(np.mean(z <= 3.0)), "pixels": int(sel.sum())}
 
 
 def main(argv=None):

@@ -378,8 +378,7 @@ class DipoleRenderer:
                         centre, radius)
         work["gbuffer"] = W * H
         out = self._targets.get("dipole_out", (W, H), 2)
-        s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
-                          add=False)
+        self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1], add=False)
         sub = gbuffer.read(out.textures[0], W, H)
         full = gbuffer.read(out.textures[1], W, H)
         if dbg is not None:

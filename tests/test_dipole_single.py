@@ -18,11 +18,11 @@ Four routes, each independent of the one it checks:
   front- and back-lit, ``g = 0.5``, 24 x 24. The ratio of the image means over the pixels two
   pixels inside the footprint (the march does not see where the view ray leaves the object: at the
   edge of a slab it runs on into the air, a stated limit) must satisfy
-  ``|ratio - 1| <= 3 SE + delta``: ``SE`` the standard error of the reference's mean (its seeds),
+  ``|ratio - 1| <= 3 SE + delta`` (``single_refs.compare_case``): ``SE`` the standard error of the reference's mean (its seeds),
   ``delta`` the estimator's known approximations, each bounded here by refining it: the march
   (64 against 256 nodes, twin), the light atlas (1024^2 against 2048^2 texels), the pixel (GL
   shades the pixel centre, Mitsuba averages the footprint: against 2 x 2 centres per pixel), and at
-  ``eta != 1`` the straight line to the light (:func:`flat_exact`: the same estimator with the true
+  ``eta != 1`` the straight line to the light (``single_refs.flat_exact``: the same estimator with the true
   refraction point on the slab's plane and the medium ending at the slab's far face);
 * the loop budget: one invocation's march x lights x taps stays under ``ITERATION_BUDGET``.
 """
@@ -175,97 +175,11 @@ def test_halfspace_closed_form(dipole_renderer, without_self_check, eta):
 
 # ----------------------------------------------------------------- against Mitsuba
 
-def flat_exact(xo, cam, plane_z, outward, scene, mat, n_march=256):
-    """S^(1) at exit points ``xo`` on a slab's face: the estimator with the true refraction point.
-
-    The light ``y`` reaches ``x`` through the point of the plane ``z = plane_z`` (outward normal
-    ``(0, 0, outward)``) where Snell's law holds (bisection on the horizontal distance), with the
-    flat interface's irradiance, phase angle and path ``s'`` of that point; nodes beyond the slab's
-    other face (the view ray has left the medium) give nothing. Same march (``n_march`` nodes).
-    """
-    eta = float(scene.boundary.eta)
-    zf, zb = scene.mesh.vertices[:, 2].max(), scene.mesh.vertices[:, 2].min()
-    n_o = np.array([0.0, 0.0, 1.0])
-    wo = np.asarray(cam, float) - xo
-    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    d = refract(-wo, np.broadcast_to(n_o, xo.shape), eta)
-    ss, st, g = single_twin.exit_material(mat, xo, np.broadcast_to(n_o, xo.shape))
-    sref = st.min(axis=1)
-    u = (np.arange(n_march) + 0.5) / n_march
-    s = -np.log(1.0 - u)[None, :] / sref[:, None]
-    wk = np.exp(-(st[:, None, :] - sref[:, None, None]) * s[..., None]) / (n_march * sref[:, None, None])
-    x = xo[:, None, :] + s[..., None] * d[:, None, :]
-    inside = (x[..., 2] <= zf + 1e-9) & (x[..., 2] >= zb)
-    acc = np.zeros(x.shape[:2] + (3,))
-    for light in scene.lights:
-        y = np.asarray(light.position, float)
-        h = np.abs(y[2] - plane_z)
-        z = np.abs(x[..., 2] - plane_z)
-        hv = x[..., :2] - y[:2]
-        delta = np.linalg.norm(hv, axis=-1)
-        lo, hi = np.zeros_like(delta), delta.copy()
-        for _ in range(60):                                   # a/|ye| = eta (delta - a)/|ex|
-            a = 0.5 * (lo + hi)
-            f = a / np.hypot(a, h) - eta * (delta - a) / np.hypot(delta - a, z)
-            lo, hi = np.where(f < 0, a, lo), np.where(f < 0, hi, a)
-        a = 0.5 * (lo + hi)
-        unit = hv / np.where(delta > 0, delta, 1.0)[..., None]
-        e = np.concatenate([y[:2] + a[..., None] * unit, np.full(a.shape + (1,), plane_z)], axis=-1)
-        d_e = np.linalg.norm(e - y, axis=-1)
-        sp = np.linalg.norm(x - e, axis=-1)
-        cos_e, cos_t = h / d_e, np.where(sp > 0, z / np.where(sp > 0, sp, 1.0), 1.0)
-        lit = (np.sign(y[2] - plane_z) == outward) & inside
-        spread = (d_e + sp / eta) * (d_e + sp * cos_e**2 / (eta * cos_t**2))
-        E = fresnel_transmittance(cos_e, eta) * (cos_e / cos_t) / spread
-        w12 = (x - e) / np.where(sp > 0, sp, 1.0)[..., None]
-        cos_ph = np.sum(w12 * -d[:, None, :], axis=-1)
-        term = np.asarray(light.intensity)[None, None] * E[..., None] * ss[:, None] * \
-            single_twin.hg(cos_ph[..., None], g[:, None]) * np.exp(-st[:, None] * sp[..., None])
-        acc += np.where(lit[..., None], term, 0.0)
-    out = np.einsum("pkc,pkc->pc", wk, acc)
-    return out * (fresnel_transmittance(wo @ n_o, eta) / eta**2)[:, None]
-
-
-def _inner(mask, coverage):
-    from scipy.ndimage import binary_erosion
-
-    return binary_erosion(mask & (coverage >= 1.0), np.ones((5, 5), bool))
-
-
 @pytest.mark.gl
 @pytest.mark.parametrize("case", MITSUBA_CASES)
 def test_against_mitsuba_single_scattering(dipole_renderer, without_self_check, case):
-    ref = np.load(DATA / f"{case}.npz")
-    sc = single_refs.case_scene(case)
-    res = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
-    d = res.debug
-    sel = _inner(res.mask, ref["coverage"])
-    assert sel.sum() >= 100
-    m_ref = ref["mean"][sel].mean()
-    se = np.sqrt(np.sum(ref["se"][sel] ** 2)) / sel.sum() / m_ref      # of the ratio, from the seeds
-    m_gl = res.subsurface[sel].mean()
-    mat = scene_material(sc)
-    # the march: 64 nodes against 256 (twin)
-    args = (d["position"][sel], d["normal"][sel], sc.camera.origin, d["atlas"], d["views"], sc.lights, mat,
-            sc.boundary.eta, 1024)
-    fine = single_twin.single_scattering(*args, n_march=256).mean()
-    delta_march = abs(single_twin.single_scattering(*args).mean() / fine - 1.0)
-    # the light atlas: 1024^2 against 2048^2 texels
-    a2 = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single", shadow_size=2048))
-    delta_atlas = abs(m_gl / a2.subsurface[sel].mean() - 1.0)
-    # the pixel: its centre against the mean of 2 x 2 centres inside it
-    W, H = sc.camera.width, sc.camera.height
-    sup = dipole_renderer.render(sc.with_resolution(2 * W, 2 * H), "dipole", DipoleParams(terms="single"))
-    box = sup.subsurface.reshape(H, 2, W, 2, 3).mean(axis=(1, 3))
-    delta_pixel = abs(m_gl / box[sel].mean() - 1.0)
-    delta_geom = 0.0
-    if sc.boundary.eta != 1.0:                           # the straight line to the light (flat slabs only)
-        zf, zb = sc.mesh.vertices[:, 2].max(), sc.mesh.vertices[:, 2].min()
-        front = sc.lights[0].position[2] > zf
-        exact = flat_exact(d["position"][sel], sc.camera.origin, zf if front else zb, 1 if front else -1, sc, mat)
-        delta_geom = abs(fine / exact.mean() - 1.0)
-    tol = 3.0 * se + delta_march + delta_atlas + delta_pixel + delta_geom
-    ratio = m_gl / m_ref
-    assert abs(ratio - 1.0) <= tol, (f"{case}: GL / Mitsuba = {ratio:.4f}, tolerance {tol:.4f} = 3 SE {3 * se:.4f} + "
-                                     f"march {delta_march:.4f} + atlas {delta_atlas:.4f} + pixel {delta_pixel:.4f} + "
-                                     f"straight line {delta_geom:.4f}")
+    c = single_refs.compare_case(dipole_renderer, case)
+    assert c["pixels"] >= 100
+    assert abs(c["ratio"] - 1.0) <= c["tolerance"], (
+        f"{case}: GL / Mitsuba = {c['ratio']:.4f}, tolerance {c['tolerance']:.4f} = 3 SE {3 * c['se']:.4f} + "
+        f"march {c['march']:.4f} + atlas {c['atlas']:.4f} + pixel {c['pixel']:.4f} + straight line {c['line']:.4f}")
