@@ -52,6 +52,16 @@ def test_march_within_loop_budget():
     assert single.iterations(MAX_LIGHTS) <= budget.ITERATION_BUDGET
 
 
+@pytest.fixture
+def without_self_check(monkeypatch):
+    """The render's own check against the twin switched off (``dipole_gl.check``): a test against an
+    independent route must catch an error of the shader by its own tolerance, not by the check's refusal
+    (which ``test_gl_matches_twin`` and ``tests/test_dipole_check.py`` cover)."""
+    from dipole_gl import check
+
+    monkeypatch.setattr(check, "CHECK_RTOL", np.inf)
+
+
 def _scene_two_lights():
     from harness.scene.load import PointLight, scene_hash
     import dataclasses
@@ -67,7 +77,7 @@ def _scene_two_lights():
 
 
 @pytest.mark.gl
-def test_gl_matches_twin(dipole_renderer):
+def test_gl_matches_twin(dipole_renderer, without_self_check):
     sc = _scene_two_lights()
     res = dipole_renderer.render(sc, "dipole", DipoleParams(terms="single"), debug=True)
     d = res.debug
@@ -128,16 +138,6 @@ def _midpoint_error(a, n=single.N_MARCH):
     """Relative error of the march's midpoint rule for ``int_0^1 (1 - u)^a du = 1/(1 + a)``."""
     u = (np.arange(n) + 0.5) / n
     return np.abs(np.mean((1.0 - u)[None, :] ** a[..., None], axis=-1) * (1.0 + a) - 1.0)
-
-
-@pytest.fixture
-def without_self_check(monkeypatch):
-    """The render's own check against the twin switched off (``dipole_gl.check``): a test against an
-    independent route must catch an error of the shader by its own tolerance, not by the check's refusal
-    (which ``test_gl_matches_twin`` and ``tests/test_dipole_check.py`` cover)."""
-    from dipole_gl import check
-
-    monkeypatch.setattr(check, "CHECK_RTOL", np.inf)
 
 
 @pytest.mark.gl
