@@ -26,6 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import single_refs  # noqa: E402
 from page import Page  # noqa: E402
+from scipy import stats  # noqa: E402
 
 BACKLIT = ("backlit_slab", "jade_backlit_dielectric")
 NIGHTLY = {"dense": {"fit": "coarsen"}, "vertex": {"density": 0.5, "range": 2.0, "fit": "coarsen"}}
@@ -128,12 +129,16 @@ def main(argv=None):
         "the four; `judged`: asserted by `tests/test_dipole_single.py`.")
     page.table(["case", "eta", "light", "ratio GL/Mitsuba", "SE", "within 2 SE", "within 3 SE", "march", "atlas",
                 "pixel", "straight line", "tolerance", "within", "judged", "pixels"], validation(renderer))
+    dof = int(single_refs.load_reference("sphere_front_eta1")["seeds"]) - 1
     page.para(
-        "`slab_front_eta1` is the march's limit: a 0.3 cm slab lit from the camera's side, where the view ray "
-        "leaves through the back face within about two mean free paths and the march, which does not know it, "
+        f"With the references' seeds, a pixel's SE has {dof} degrees of freedom: noise alone puts "
+        f"{2 * stats.t.cdf(2, dof) - 1:.3f} of the pixels within 2 SE and {2 * stats.t.cdf(3, dof) - 1:.3f} within 3 SE "
+        "(Student's t). `slab_front_eta1` shows the march's limit: a 0.3 cm slab (1.8 mean free paths) lit from the "
+        "camera's side, where the view ray leaves through the back face and the march, which does not know it, "
         "keeps gathering light behind the slab (the half-space assumption of Jensen et al.'s estimator). "
-        "`sphere_front_eta13` has no flat-interface bound: its excess is the straight line to the light and the "
-        "flat interface on a curved surface (radius 8 mean free paths).")
+        "`sphere_front_eta13` is not judged: on a curved surface the estimator's two flat-interface approximations "
+        "(the straight line to the light, the beam's spread through a plane) have no bound here, and what part of "
+        "its difference each makes is not measured.")
     page.para(
         "Back light, the suite's back-lit scenes at their committed small size against their committed reference "
         f"(all orders of scattering; its fully covered pixels). Mitsuba's single scattering rendered here with "
