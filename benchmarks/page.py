@@ -59,7 +59,8 @@ OTHER_PAGES = (("docs/main_job.md", "bench_nightly.py"), ("docs/reference_cost.m
                ("docs/reference_pilot.md", "bench_reference_cost.py"))
 #: Files of ``benchmarks/`` that are not benchmarks.
 NOT_BENCHMARKS = ("page.py",
-                  "reseeded_references.py")       # renders references for accuracy_sensitivity.py; prints no figure
+                  "reseeded_references.py",       # renders references for accuracy_sensitivity.py; prints no figure
+                  "single_refs.py")               # renders tests/data/single/ for the S1 tests; prints no figure
 
 
 def _shown(path):

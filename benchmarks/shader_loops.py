@@ -23,7 +23,7 @@ import numpy as np
 from harness.errors import InputError
 from harness.regression.accuracy import small_scene
 from harness.scene import list_scenes
-from dipole_gl import budget, sizing
+from dipole_gl import budget, single, sizing
 from dipole_gl.medium import scene_material
 from dipole_gl.params import DipoleParams
 from dipole_gl.sampling import N_PHI, radial_nodes, sample_count
@@ -116,6 +116,14 @@ def loops(figs):
          "yes (a row can exceed the budget)"),
         ("dipole_gl/shaders/kernels.glsl", "for (int k = 0; k < 3; ++k)",
          "dirpole_sd: the three colours", "3", (3, "all"), None, f"no: counted as {C} per call"),
+        ("dipole_gl/shaders/single.comp", "for (int k = 0; k < u_n_march; ++k)",
+         "single scattering: march nodes x lights x atlas taps", f"{single.N_MARCH} (1 + L (1 + {single.ATLAS_TAPS}))",
+         _largest(figs, lambda fig: single.iterations(L(fig))), None,
+         f"no: fixed, {single.iterations(8):,} with 8 lights"),
+        ("dipole_gl/shaders/single.comp", "for (int l = 0; l < u_n_lights; ++l)",
+         "single scattering: lights", "L <= 8", _largest(figs, L), None, "no"),
+        ("dipole_gl/shaders/single.comp", "for (int k = 0; k < 4; ++k)",
+         "single scattering: bilinear atlas taps", "4 per light", _largest(figs, lambda fig: 4 * L(fig)), None, "no"),
         ("dipole_gl/shaders/irradiance.comp", "for (int l = 0; l < u_n_lights; ++l)",
          "irradiance: lights", "L <= 8", _largest(figs, L), None, "no"),
         ("dipole_gl/shaders/gbuffer.frag", "for (int i = 0; i < 8; ++i)",

@@ -9,7 +9,10 @@ After each frame the renderer recomputes :data:`CHECK_POINTS` points of its own 
   sample, near field, exit Fresnel), :func:`dipole_gl.twin.dense_gather`;
 * vertex gather: scattering vertices that the display mesh reads (so they reach covered
   pixels), drawn the same way; the twin evaluates their neighbourhood sums ``B``,
-  :func:`dipole_gl.twin.vertex_gather` (the raster pass that interpolates ``B`` is not checked).
+  :func:`dipole_gl.twin.vertex_gather` (the raster pass that interpolates ``B`` is not checked);
+* single scattering (``terms`` = ``both`` or ``single``, either gather): covered pixels drawn
+  the same way; :func:`dipole_gl.single_twin.single_scattering` recomputes S^(1) there from the
+  G-buffer's exit points and the light atlas read back (the atlas's raster is not checked).
 
 The result is refused (:class:`harness.errors.ResultRefused`, one line) when
 ``|GL - twin| > CHECK_RTOL * scale`` at any checked point and colour, ``scale`` the largest
@@ -32,9 +35,9 @@ import numpy as np
 
 from harness.errors import ResultRefused
 
-from . import twin
+from . import single_twin, twin
 
-__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "compare"]
+__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "check_single", "compare"]
 
 #: Points recomputed by the twin per render.
 CHECK_POINTS = 8
@@ -93,3 +96,17 @@ def check_vertex(kernel, scene, mat, pre, flux_gl, b):
     return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
             "twin_evaluations": int(rows * (len(scene.lights) if kernel == "dirpole" else 1)
                                     + len(pre.positions) * len(scene.lights))}
+
+
+def check_single(scene, mat, views, size, atlas, gbuf, s1):
+    """Recompute S^(1) at :data:`CHECK_POINTS` covered pixels (``gbuf``: position, normal, mask (H, W, ...);
+    ``atlas`` from :func:`dipole_gl.single.read_atlas`, tile ``size``) -> the record for ``info["single"]``."""
+    t = time.perf_counter()
+    rows, cols = np.nonzero(gbuf["mask"])
+    pick = _draw(len(rows))
+    r, c = rows[pick], cols[pick]
+    ref = single_twin.single_scattering(gbuf["position"][r, c], gbuf["normal"][r, c], scene.camera.origin, atlas,
+                                        views, scene.lights, mat, float(scene.boundary.eta), size)
+    rel = compare(s1[r, c], ref, f"{scene.name}: single scattering")
+    return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
+            "twin_evaluations": int(len(pick) * single_twin.N_MARCH * len(scene.lights))}

@@ -19,6 +19,9 @@ field              gather     meaning
 ``fit``            both       ``refuse`` (default) or ``coarsen``: a setting over the
                               gather's budget is refused, or coarsened just enough
                               (:mod:`dipole_gl.sizing`)
+``terms``          both       ``both`` (default: Jensen et al. 2001's ``S_d + S^(1)``),
+                              ``diffusion`` (the kernel alone) or ``single`` (``S^(1)``
+                              alone, :mod:`dipole_gl.single`)
 =================  =========  ==========================================================
 
 ``l'`` is the smallest reduced mean free path of the medium (largest ``sigma_t'`` over
@@ -34,12 +37,14 @@ from dataclasses import dataclass, field
 
 from harness.errors import InputError
 
-__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "GATHER_FIELDS", "DEFAULTS"]
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS", "DEFAULTS"]
 
 KERNELS = ("dipole", "dirpole")
 GATHERS = ("dense", "vertex")
 #: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
 FITS = ("refuse", "coarsen")
+#: Which terms of the BSSRDF a render adds (``both`` is the default, as Jensen et al. 2001 render it).
+TERMS = ("diffusion", "single", "both")
 #: gather -> the parameters that belong to it alone, with their defaults
 GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0}}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
@@ -64,6 +69,8 @@ class DipoleParams:
     shadow_size: int = _p(1024, "shadow-map resolution per light (visibility of the irradiance), in [16, 8192]")
     fit: str | None = _p(None, "a spacing (dense) or vertex density (vertex) over the gather's budget: refuse "
                                "(default) or coarsen it just enough to fit (the value used is in the result)")
+    terms: str = _p("both", "BSSRDF terms: both (default; Jensen et al. 2001's diffusion term plus single "
+                            "scattering), diffusion (the kernel alone) or single (single scattering alone)")
 
     def __post_init__(self):
         def bad(name, problem, fix):
@@ -95,6 +102,8 @@ class DipoleParams:
             bad("fit", f"unknown value {self.fit!r}", "use one of: " + ", ".join(FITS))
         if self.fit == "refuse":                       # the default: left out of the label
             object.__setattr__(self, "fit", None)
+        if self.terms not in TERMS:
+            bad("terms", f"unknown value {self.terms!r}", "use one of: " + ", ".join(TERMS))
         v = self.shadow_size
         if isinstance(v, bool) or not isinstance(v, int) or not 16 <= v <= 8192:
             bad("shadow_size", f"must be an integer in [16, 8192], got {v!r}", "change the value")

@@ -34,6 +34,12 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
      - vertex
      - :mod:`dipole_gl.gather` (``display.comp``), :mod:`dipole_gl.shade` (``shade_vertex.*``)
      - per-vertex result to the display mesh, Gouraud raster, exit Fresnel, reflection
+   * - ``single``
+     - both (``terms`` = ``both`` or ``single``)
+     - :mod:`dipole_gl.single` (``rsm.vert/frag``, ``single.comp``)
+     - Jensen et al. 2001's single-scattering term per pixel, added to the image (the vertex
+       gather first runs the ``gbuffer`` stage for its exit points); ``terms = single`` runs only
+       ``shadow``, ``gbuffer`` and ``single``
 
 Precomputation (host, timed apart from the frame, once per scene and setting): the
 medium's coefficients (``material``), the dense samples (``sampling``,
@@ -45,7 +51,7 @@ Limits
 ------
 * At most :data:`MAX_LIGHTS` point lights, each outside the mesh's bounding sphere for a
   complete shadow map (SSLPV's frustum; a light inside gets a capped field of view).
-* Multiple scattering only (both papers leave out or separate single scattering).
+* Single scattering (``terms``) is Jensen et al.'s estimate, with its limits (:mod:`dipole_gl.single`).
 * A heterogeneous medium is seen through the material at the exit point (:mod:`dipole_gl.medium`).
 * No shader invocation runs more than :data:`dipole_gl.budget.ITERATION_BUDGET` loop iterations:
   the gathers run in chunks (llvmpipe ends longer loops silently).
@@ -67,7 +73,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, gbuffer, irradiance, shade, sizing
+from . import check, gbuffer, irradiance, shade, single, sizing
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -81,12 +87,13 @@ __all__ = ["DipoleRenderer", "DipoleResult", "STAGES", "WORK_UNITS", "MAX_LIGHTS
 N_RAD = len(radial_nodes()[0])
 
 #: Frame stages per gather, in order.
-STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather"),
-          "vertex": ("shadow", "irradiance", "gather", "shading")}
+STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather", "single"),
+          "vertex": ("shadow", "irradiance", "gather", "shading", "gbuffer", "single")}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
-              "shading": "pixels + display vertices", "material": "voxels", "sampling": "surface samples",
+              "shading": "pixels + display vertices", "single": "march nodes x lights (covered pixels)",
+              "material": "voxels", "sampling": "surface samples",
               "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices"}
 
 
@@ -127,6 +134,7 @@ class DipoleRenderer:
         self._targets = Targets(self.ctx)
         self._scene_key = None
         self._scene_cache = {}
+        self._last_single = None                 # the single stage's read-backs of the last render (debug)
         with self.ctx:
             warm_up_queries(self.ctx)
 
@@ -141,7 +149,8 @@ class DipoleRenderer:
                      "dense": lambda w: gathers.build_dense(self.ctx, key[1], w),
                      "vertex": lambda w: gathers.build_vertex(self.ctx, key[1], w),
                      "display": lambda w: gathers.build_display(self.ctx, w),
-                     "shade": lambda w: shade.build_program(self.ctx, w)}[key[0]]
+                     "shade": lambda w: shade.build_program(self.ctx, w),
+                     "single": lambda w: single.build_program(self.ctx, w)}[key[0]]
             prog = build(self.warnings)
             self._programs[key] = prog
         return prog
@@ -228,9 +237,12 @@ class DipoleRenderer:
             shadow_tex = rsm.render_shadow_atlas(self.ctx, prog, self._mesh_vao(scene, prog, "rsm"), self._targets,
                                                  scene, s, views, slot="dipole_shadow")
         work = {"shadow": s * s * L}
-        info = {"kernel": kernel, "gather": params.gather, "mfp": mat.mfp, "diffusion_length": mat.diffusion_length,
+        info = {"kernel": kernel, "gather": params.gather, "terms": params.terms, "mfp": mat.mfp, "diffusion_length": mat.diffusion_length,
                 "homogeneous": mat.homogeneous}
         dbg = {} if debug else None
+        if params.terms == "single":
+            return self._render_single_only(scene, params, mat, medium, views, shadow_tex, centre, radius, timer,
+                                            work, info, pre_ms, pre_work, warnings, dbg)
         if params.gather == "dense":
             spacing = params.spacing
             if params.fit == "coarsen":
@@ -253,6 +265,9 @@ class DipoleRenderer:
             with timer.stage("gather"):
                 dispatches = gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb,
                                                out.textures[0], out.textures[1], scene, spacing * mat.mfp)
+            if params.terms == "both":
+                s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0],
+                                  out.textures[1], add=True)
             sub = gbuffer.read(out.textures[0], W, H)
             full = gbuffer.read(out.textures[1], W, H)
             gpos = gbuffer.read(gb.textures[0], W, H)
@@ -261,7 +276,8 @@ class DipoleRenderer:
             vis = np.concatenate([gbuffer.read(gb.textures[3], W, H), gbuffer.read(gb.textures[4], W, H)], -1)
             gview = {"position": gpos[..., :3], "normal": gbuffer.read(gb.textures[1], W, H)[..., :3],
                      "visibility": vis[..., :L], "mask": mask}
-            info["check"] = check.check_dense(kernel, scene, mat, entry.host, flux, gview, sub[..., :3],
+            diffusion = sub[..., :3] - s1 if params.terms == "both" else sub[..., :3]
+            info["check"] = check.check_dense(kernel, scene, mat, entry.host, flux, gview, diffusion,
                                               spacing * mat.mfp)
             lit = (flux[..., 3] > 0).sum(axis=1)                        # lit samples per light
             per_pixel = int(lit.sum()) if kernel == "dirpole" else int(np.any(flux[..., 3] > 0, axis=0).sum())
@@ -270,6 +286,8 @@ class DipoleRenderer:
             work.update(gbuffer=W * H, irradiance=points.count * L, gather=int(mask.sum()) * (per_pixel + near))
             info.update(samples=points.count, spacing=spacing * mat.mfp, spacing_used=spacing, dispatches=dispatches)
             if debug:
+                if params.terms == "both":
+                    dbg["single_pass"] = self._last_single
                 dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
                            samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
@@ -290,6 +308,17 @@ class DipoleRenderer:
                 shade.run(self.ctx, prog, self._mesh_vao(scene, prog, ("shade_vertex", kernel, pre.edge, params.range),
                                                           vbufs.b_display), out, scene,
                           views, shadow_tex, s, centre, radius)
+            if params.terms == "both":
+                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+                with timer.stage("gbuffer"):
+                    prog = self._program(("gbuffer",))
+                    gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
+                                s, centre, radius)
+                work["gbuffer"] = W * H
+                s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[1],
+                                  out.textures[0], add=True)
+                if debug:
+                    dbg["single_pass"] = self._last_single
             full = gbuffer.read(out.textures[0], W, H)
             sub = gbuffer.read(out.textures[1], W, H)
             mask = sub[..., 3] > 0.5
@@ -312,6 +341,53 @@ class DipoleRenderer:
             timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work, precompute_work=pre_work,
             gl_renderer=self.gl_renderer, warnings=list(self.warnings) + warnings + timer.warnings, info=info,
             debug=dbg)
+
+    def _single(self, scene, params, medium, views, timer, work, info, gb, out_sub, out_full, add):
+        """The ``single`` stage (:mod:`dipole_gl.single`) on the G-buffer ``gb``, checked against its twin
+        (``info["single"]``) -> S^(1) (H, W, 3) as read back."""
+        cam = scene.camera
+        W, H, s = cam.width, cam.height, params.shadow_size
+        with timer.stage("single"):
+            rsm_prog = self._program(("rsm",))
+            atlas = single.render_light_atlas(self.ctx, rsm_prog, self._mesh_vao(scene, rsm_prog, "rsm"),
+                                              self._targets, scene, s, views)
+            s1_tex = self._targets.get("dipole_single", (W, H), 1).textures[0]
+            single.run(self._program(("single",)), gb, atlas, medium, out_sub, out_full, s1_tex, scene, views, s,
+                       add)
+        s1 = gbuffer.read(s1_tex, W, H)
+        covered = s1[..., 3] > 0.5
+        work["single"] = int(covered.sum()) * single.N_MARCH * len(scene.lights)
+        gview = {"position": gbuffer.read(gb.textures[0], W, H)[..., :3],
+                 "normal": gbuffer.read(gb.textures[1], W, H)[..., :3], "mask": covered}
+        atlas_host = single.read_atlas(atlas)
+        info["single"] = check.check_single(scene, self._material(scene, info["kernel"])[0].value, views, s,
+                                            atlas_host, gview, s1[..., :3])
+        self._last_single = {"atlas": atlas_host, "views": views, "position": gview["position"],
+                             "normal": gview["normal"], "mask": covered, "single": s1[..., :3]}
+        return s1[..., :3]
+
+    def _render_single_only(self, scene, params, mat, medium, views, shadow_tex, centre, radius, timer, work, info,
+                            pre_ms, pre_work, warnings, dbg):
+        """``terms = single``: the G-buffer and S^(1) alone (no irradiance, no gather)."""
+        cam = scene.camera
+        W, H, s = cam.width, cam.height, params.shadow_size
+        gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+        with timer.stage("gbuffer"):
+            prog = self._program(("gbuffer",))
+            gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex, s,
+                        centre, radius)
+        work["gbuffer"] = W * H
+        out = self._targets.get("dipole_out", (W, H), 2)
+        self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1], add=False)
+        sub = gbuffer.read(out.textures[0], W, H)
+        full = gbuffer.read(out.textures[1], W, H)
+        if dbg is not None:
+            dbg.update(self._last_single)
+        return DipoleResult(
+            full=np.ascontiguousarray(full[..., :3]), subsurface=np.ascontiguousarray(sub[..., :3]),
+            mask=sub[..., 3] > 0.5, timings_ms=dict(timer.ms), precompute_ms=pre_ms, work=work,
+            precompute_work=pre_work, gl_renderer=self.gl_renderer,
+            warnings=list(self.warnings) + warnings + timer.warnings, info=info, debug=dbg)
 
     def _fitted_vertex_data(self, scene, mat, kernel, params):
         """:meth:`_vertex_data` at the density of ``params``, or with ``fit = coarsen`` at the density of

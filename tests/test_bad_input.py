@@ -313,6 +313,8 @@ CLI_CASES = [
      "--size: size: 9000x64 is larger than 8192x8192"),
     ("render-size-rival", ["render", "thin_ring", "--method", "dipole", "--out", "o", "--size", "tiny"],
      "--size: size: 'tiny' is not WIDTHxHEIGHT"),
+    ("render-terms-unknown", ["render", "thin_ring", "--method", "dipole", "--out", "o", "--terms", "multiple"],
+     "--terms: terms: unknown value 'multiple'; use one of: diffusion, single, both"),
     ("command-unknown", ["frobnicate"], "sslpv-harness: command: unknown command 'frobnicate'"),
     ("target-nan", ["reference", "thin_ring", "--target", "nan"], "--target: target: must be a relative standard"),
     ("date-bad", ["nightly", "--date", "2026-13-45", "--out", "n", "--store", "n.sqlite"], "--date: date:"),

@@ -41,7 +41,7 @@ def test_gl_matches_twin(renderer, name, kernel):
     """Irradiance, dense gather (far and near field), vertex gather and display transfer, pass by pass."""
     scene = load_scene(name).with_resolution(16, 16)
     mat = scene_material(scene)
-    res = renderer.render(scene, kernel, DipoleParams(spacing=3.0), debug=True)
+    res = renderer.render(scene, kernel, DipoleParams(spacing=3.0, terms="diffusion"), debug=True)
     d = res.debug
     pos, nrm, area = d["samples"]
     flux, dirs = twin.irradiance(pos, nrm, area, scene.lights, scene.boundary.eta, d["flux"][..., 3])
@@ -50,7 +50,8 @@ def test_gl_matches_twin(renderer, name, kernel):
     ref = twin.dense_gather(kernel, d["position"][m], d["normal"][m], scene.camera.origin, (pos, nrm), flux, dirs,
                             mat, scene.boundary.eta, d["spacing"], scene.lights, d["visibility"][m])
     close(res.subsurface[m], ref, f"{name} {kernel} dense gather")
-    res = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=0.25, range=2.0), debug=True)
+    res = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=0.25, range=2.0, terms="diffusion"),
+                          debug=True)
     d, pre = res.debug, res.debug["pre"]
     flux, dirs = twin.irradiance(pre.positions, pre.normals, pre.areas, scene.lights, scene.boundary.eta,
                                  d["flux"][..., 3])
@@ -121,12 +122,13 @@ def test_dense_gather_conserves_the_kernels_energy_on_a_flat_slab(renderer, kern
 def test_vertex_converges_to_dense(renderer, kernel):
     """As the neighbourhood and the vertex density grow, the vertex gather's image approaches the dense one."""
     scene = load_scene("sphere_homogeneous").with_resolution(32, 32)
-    dense = renderer.render(scene, kernel, DipoleParams(spacing=0.5))
+    dense = renderer.render(scene, kernel, DipoleParams(spacing=0.5, terms="diffusion"))
     m = dense.mask
     ref = dense.subsurface[m]
     errs, energies = [], []
     for density, range_ in ((0.25, 1.0), (1.0, 2.0), (2.0, 3.0)):
-        x = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=density, range=range_)).subsurface[m]
+        x = renderer.render(scene, kernel, DipoleParams(gather="vertex", density=density, range=range_,
+                                                        terms="diffusion")).subsurface[m]
         errs.append(float(np.mean((x - ref) ** 2 / (ref ** 2 + 1e-4))))
         energies.append(float(x.sum() / ref.sum()))
     print(f"{kernel}: vertex vs dense at (density, range) = (0.25, 1), (1, 2), (2, 3): "

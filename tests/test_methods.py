@@ -51,9 +51,9 @@ class TestRegistry:
                          {"method": "dipole", "gather": ["dense"], "spacing": [1.0, 0.5]},
                          {"method": "dipole", "gather": ["vertex"], "density": [0.5]}]
         dense = expand("dipole", {k: v for k, v in prods[1].items() if k != "method"})
-        assert [p.as_dict() for p in dense] == [{"gather": "dense", "spacing": 1.0, "shadow_size": 1024},
-                                                {"gather": "dense", "spacing": 0.5, "shadow_size": 1024}]
-        assert config_label("dipole", dense[1]) == "dipole-gather=dense-shadow_size=1024-spacing=0.5"
+        assert [p.as_dict() for p in dense] == [{"gather": "dense", "spacing": 1.0, "shadow_size": 1024, "terms": "both"},
+                                                {"gather": "dense", "spacing": 0.5, "shadow_size": 1024, "terms": "both"}]
+        assert config_label("dipole", dense[1]) == "dipole-gather=dense-shadow_size=1024-spacing=0.5-terms=both"
         assert config_label("sslpv", {"N": 16, "steps": 8, "mapping": "collision"}) == "N16-K8-collision"
 
     @pytest.mark.parametrize("methods,values,match", [

@@ -6,10 +6,15 @@ uniform vec3 u_bbox_min;
 uniform vec3 u_bbox_size;
 uniform ivec3 u_res;           // nx, ny, nz
 
-Coeffs coeffs_at(vec3 p, vec3 n)
+ivec3 voxel_at(vec3 p, vec3 n)
 {
     vec3 h = u_bbox_size / vec3(u_res);
     vec3 q = p - 0.5 * h * n;
-    ivec3 v = clamp(ivec3(floor((q - u_bbox_min) / u_bbox_size * vec3(u_res))), ivec3(0), u_res - 1);
+    return clamp(ivec3(floor((q - u_bbox_min) / u_bbox_size * vec3(u_res))), ivec3(0), u_res - 1);
+}
+
+Coeffs coeffs_at(vec3 p, vec3 n)
+{
+    ivec3 v = voxel_at(p, n);
     return coeffs_of(texelFetch(u_sp, v, 0).rgb, texelFetch(u_sa, v, 0).rgb, texelFetch(u_st, v, 0).rgb);
 }

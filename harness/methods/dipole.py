@@ -3,7 +3,9 @@
 Both render with :class:`dipole_gl.renderer.DipoleRenderer`; their parameters are
 :class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex``, ``--spacing`` for dense,
 ``--range`` and ``--density`` for vertex, ``--shadow-size``, ``--fit refuse|coarsen``: a setting over
-the gather's budget refused or coarsened just enough, :mod:`dipole_gl.sizing`). A scene with a non-scattering
+the gather's budget refused or coarsened just enough, :mod:`dipole_gl.sizing`; ``--terms both|diffusion|single``:
+Jensen et al. 2001's complete BSSRDF, the diffusion kernel alone or single scattering alone,
+:mod:`dipole_gl.single`). A scene with a non-scattering
 voxel inside the mesh (albedo 0) is refused with one line (:mod:`dipole_gl.medium`).
 """
 
@@ -17,7 +19,7 @@ __all__ = ["DipoleMethod", "CLI_TO_FIELD"]
 
 #: command-line name -> DipoleParams field (shared by both kernels)
 CLI_TO_FIELD = {"gather": "gather", "spacing": "spacing", "range": "range", "density": "density",
-                "shadow_size": "shadow_size", "fit": "fit"}
+                "shadow_size": "shadow_size", "fit": "fit", "terms": "terms"}
 
 _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Hao & Varshney 2004) in GLSL",
            "dirpole": "directional dipole (Frisvad, Hachisuka & Kjeldsen 2014) in GLSL"}
@@ -25,7 +27,7 @@ _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Ha
 
 class DipoleMethod(Method):
     cli = CLI_TO_FIELD
-    stages = ("shadow", "gbuffer", "irradiance", "gather", "shading")   # the union of both gathers'
+    stages = ("shadow", "gbuffer", "irradiance", "gather", "shading", "single")   # the union of both gathers'
 
     def __init__(self, kernel, shared):
         from dipole_gl.params import DipoleParams
