@@ -67,7 +67,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, gbuffer, irradiance, shade, sizing
+from . import check, cubemap, gbuffer, irradiance, shade, sizing
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -82,12 +82,13 @@ N_RAD = len(radial_nodes()[0])
 
 #: Frame stages per gather, in order.
 STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather"),
-          "vertex": ("shadow", "irradiance", "gather", "shading")}
+          "vertex": ("shadow", "irradiance", "gather", "shading"), "cubemap": cubemap.STAGES}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
               "shading": "pixels + display vertices", "material": "voxels", "sampling": "surface samples",
-              "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices"}
+              "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices",
+              "lightbuffer": "light-buffer texels", "cubemap": "cube-face texels", "combine": "pixels"}
 
 
 @dataclass
@@ -141,7 +142,10 @@ class DipoleRenderer:
                      "dense": lambda w: gathers.build_dense(self.ctx, key[1], w),
                      "vertex": lambda w: gathers.build_vertex(self.ctx, key[1], w),
                      "display": lambda w: gathers.build_display(self.ctx, w),
-                     "shade": lambda w: shade.build_program(self.ctx, w)}[key[0]]
+                     "shade": lambda w: shade.build_program(self.ctx, w),
+                     "cube_face": lambda w: cubemap.build_face(self.ctx, w),
+                     "cube_gather": lambda w: cubemap.build_gather(self.ctx, key[1], w),
+                     "cube_combine": lambda w: cubemap.build_combine(self.ctx, w)}[key[0]]
             prog = build(self.warnings)
             self._programs[key] = prog
         return prog
@@ -231,7 +235,12 @@ class DipoleRenderer:
         info = {"kernel": kernel, "gather": params.gather, "mfp": mat.mfp, "diffusion_length": mat.diffusion_length,
                 "homogeneous": mat.homogeneous}
         dbg = {} if debug else None
-        if params.gather == "dense":
+        if params.gather == "cubemap":
+            sub, full, mask, more, extra, dbg = cubemap.render(self, scene, kernel, params, mat, medium, views,
+                                                                shadow_tex, centre, radius, timer, debug)
+            work.update(more)
+            info.update(extra)
+        elif params.gather == "dense":
             spacing = params.spacing
             if params.fit == "coarsen":
                 spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing, W * H)
