@@ -8,8 +8,9 @@ As :mod:`dipole_gl.check` for the other gathers, after the frame:
 * ``combine``: as many covered camera pixels; :func:`dipole_gl.twin_cubemap.combine` recomputes them
   from the GL G-buffer, the faces (coverage, depth) and the GL ``C^f``.
 
-A point whose lookup lies within float32 rounding of a texel edge (``ambiguous``: GL and the float64
-twin may pick neighbouring texels, both right) is not drawn; the draw takes the next candidates.
+A point whose lookup lies within float32 rounding of a texel edge (``ambiguous``, or a disc sample
+with ``slack``: GL and the float64 twin may pick neighbouring texels, both right) is not drawn; the
+draw takes the next of :data:`CANDIDATES` candidates.
 Either pass off by more than :data:`dipole_gl.check.CHECK_RTOL` of the checked points' scale refuses
 the result (:class:`harness.errors.ResultRefused`, one line). The raster passes (light buffer, faces,
 G-buffer) are not checked here (``tests/test_dipole_cubemap.py`` checks them against a ray caster).
@@ -51,10 +52,10 @@ def check_cubemap(kernel, scene, mat, views, raw, params):
     centre = bounding_sphere(scene.mesh)[0]                  # each light's axis aims at it (rsm.light_view)
     axes = [twin_cubemap.light_axis(light.position, centre) for light in scene.lights]
     lb = raw["lb_pos"]
-    ref, amb = twin_cubemap.gather(kernel, fp[r, c, :3], fn[r, c, :3], lb[..., :3], raw["lb_nrm"][..., :3],
+    ref, amb, slack = twin_cubemap.gather(kernel, fp[r, c, :3], fn[r, c, :3], lb[..., :3], raw["lb_nrm"][..., :3],
                                    lb[..., 3] > 0.5, scene.lights, views, axes, mat, eta, params.samples,
                                    params.frames, raw["disc_radius"], params.eps_g)
-    keep = np.nonzero(~amb)[0][:CHECK_POINTS]
+    keep = np.nonzero(~amb & ~np.any(slack > 0, axis=1))[0][:CHECK_POINTS]
     rel_g = compare(raw["accum"][r[keep], c[keep]], ref[keep], f"{scene.name}: {kernel} cubemap gather")
     gmask = raw["gpos"][..., 3] > 0.5
     prow, pcol = np.nonzero(gmask)

@@ -26,7 +26,8 @@ Textures are arrays in GL's layout: ``[row, column]`` with row 0 at the bottom (
 without flipping), the six faces (or the lights' buffers) side by side along the columns.
 Everything runs in float64; a texel index is ``floor(uv N)`` as in the shaders, so a lookup whose
 ``uv N`` lies within float32 rounding of a texel edge can pick the neighbouring texel in GL
-(:func:`gather` and :func:`combine` report such points as ``ambiguous``).
+(:func:`gather` and :func:`combine` report such points as ``ambiguous``, and :func:`gather` bounds
+what a disc sample's neighbouring texel would change as ``slack``).
 """
 
 from __future__ import annotations
@@ -39,10 +40,14 @@ from . import kernels
 from .cubemap_geometry import disc, rotations
 from .twin import exit_coefficients
 
-__all__ = ["raycast", "gather", "combine", "light_axis", "EDGE"]
+__all__ = ["raycast", "gather", "combine", "light_axis", "EDGE", "EDGE_SAMPLE"]
 
-#: A lookup with ``uv N`` within this many texels of a texel edge is ambiguous between float32 and float64.
-EDGE = 1e-3
+#: A lookup with ``uv N`` within this many texels of a texel edge is ambiguous between float32 and float64
+#: (the disc's centre, a face texel in the combination): such a point is left out of a comparison.
+EDGE = 1e-4
+#: The same for a disc sample (its angle goes through GLSL's sin and cos): its neighbouring texel's
+#: contribution is evaluated too, and the difference allowed (``slack``).
+EDGE_SAMPLE = 1e-3
 
 
 def light_axis(light_pos, centre):
@@ -82,33 +87,37 @@ def raycast(mesh, origins, dirs, pairs=2_000_000):
             q = np.cross(tv, e1[None])
             w = np.sum(dd * q, axis=-1) * inv
             t = np.sum(e2[None] * q, axis=-1) * inv
-        ok = (np.abs(det) > 1e-14) & (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0)
+            ok = (np.abs(det) > 1e-14) & (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0)
         t = np.where(ok, t, np.inf)
         k = np.argmin(t, axis=1)
         tk = t[np.arange(len(k)), k]
         best[sl], tri[sl] = tk, np.where(np.isfinite(tk), k, -1)
         bu[sl], bv[sl] = u[np.arange(len(k)), k], w[np.arange(len(k)), k]
     hit = tri >= 0
-    pos = np.where(hit[:, None], o + best[:, None] * d, 0.0)
+    pos = np.where(hit[:, None], o + np.where(hit, best, 0.0)[:, None] * d, 0.0)
     ft = f[np.maximum(tri, 0)]
     n = (1 - bu - bv)[:, None] * nv[ft[:, 0]] + bu[:, None] * nv[ft[:, 1]] + bv[:, None] * nv[ft[:, 2]]
     n = np.where(hit[:, None], n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), 0.0)
     return pos, n, hit, np.where(hit, best, np.inf)
 
 
-def _edge(x):
-    """True where ``x`` (in texels) lies within :data:`EDGE` of an integer."""
-    return np.abs(x - np.round(x)) < EDGE
+def _edge(x, tol):
+    """True where ``x`` (in texels) lies within ``tol`` texels of an integer."""
+    return np.abs(x - np.round(x)) < tol
 
 
 def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, axes, mat, eta, samples, frames,
            disc_radius, eps_g):
-    """``(C (P, 3), ambiguous (P,))``: the face texels' gathered radiance, averaged over ``frames`` rotations.
+    """``(C (P, 3), ambiguous (P,), slack (P, 3))``: the face texels' gathered radiance over ``frames`` rotations.
 
     ``lb_pos``/``lb_nrm`` (S, S L, 3) and ``lb_valid`` (S, S L) are the light buffers (GL layout,
     light ``l`` in columns ``l S .. (l + 1) S - 1``); ``views`` the lights'
     :class:`sslpv_gl.rsm.LightView`, ``axes`` their unit view axes; ``disc_radius`` in world units,
     ``eps_g`` in light-buffer texels. ``C`` has no exit Fresnel (:func:`combine` applies it).
+    ``ambiguous``: the disc's centre lookup lies within :data:`EDGE` of a texel edge (GL may take the
+    neighbour, and with it another disc size). ``slack``: for every disc sample within
+    :data:`EDGE_SAMPLE` of a texel edge, ``|contribution with the neighbouring texel - contribution|``,
+    summed; GL may differ from ``C`` by up to that (float32 against float64 picking the other texel).
     """
     xo = np.asarray(exit_pos, np.float64)
     no = np.asarray(exit_nrm, np.float64)
@@ -118,6 +127,7 @@ def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, 
     ms = {k: (v[:, None] if isinstance(v, np.ndarray) and v.ndim == 2 else v) for k, v in m.items()}
     pts = disc(samples)                                           # (k, 2)
     out = np.zeros((P, 3))
+    slack = np.zeros((P, 3))
     amb = np.zeros(P, bool)
     for l, (light, view) in enumerate(zip(lights, views)):
         L = np.asarray(light.position, np.float64)
@@ -131,7 +141,7 @@ def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, 
         xs = xo - eps[:, None] * (no - wl * np.sum(wl * no, axis=1, keepdims=True))       # Sec. 4.3.1
         clip = np.concatenate([xs, np.ones((P, 1))], axis=1) @ view.view_proj.T
         uv = clip[:, :2] / clip[:, 3:4] * 0.5 + 0.5
-        amb |= np.any(_edge(uv * S), axis=1)
+        amb |= np.any(_edge(uv * S, EDGE), axis=1)
         tc = np.floor(uv * S).astype(np.int64)
         inside = np.all((tc >= 0) & (tc < S), axis=1)
         tcc = np.clip(tc, 0, S - 1)
@@ -140,20 +150,17 @@ def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, 
         depth = np.where(ok, (lb_pos[tcc[:, 1], col] - L) @ ax, depth_o)                  # x_o^T's depth
         r_uv = disc_radius / (2.0 * th * depth)
         plane = np.pi / samples * r_uv**2 * 4.0 * th * th                                # (P,)
-        for phi in rotations(frames):
-            rot = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
-            q = pts @ rot.T                                                              # (k, 2)
-            # the shader's angle is j * GOLDEN_ANGLE + phi: the rotated spiral
-            uj = uv[:, None, :] + r_uv[:, None, None] * q[None]                          # (P, k, 2)
-            amb |= np.any(_edge(uj * S) & np.all((uj >= 0) & (uj < 1), axis=-1, keepdims=True), axis=(1, 2))
-            inb = np.all((uj >= 0.0) & (uj < 1.0), axis=-1)
-            tj = np.clip(np.floor(uj * S).astype(np.int64), 0, S - 1)
+
+        def contribution(uj, tj):
+            """(P, k, 3) per-sample ``L S (n.w) F_t dA`` (times I) of the samples at ``uj`` read from texels ``tj``."""
+            inb = np.all((uj >= 0.0) & (uj < 1.0), axis=-1) & np.all((tj >= 0) & (tj < S), axis=-1)
+            tj = np.clip(tj, 0, S - 1)
             cj = tj[..., 0] + l * S
             valid = inb & lb_valid[tj[..., 1], cj]
             xi = lb_pos[tj[..., 1], cj]
             ni = lb_nrm[tj[..., 1], cj]
             to = L - xi
-            d2 = np.sum(to * to, axis=-1)
+            d2 = np.maximum(np.sum(to * to, axis=-1), 1e-300)
             wi = to / np.sqrt(d2)[..., None]
             cos_i = np.sum(wi * ni, axis=-1)
             use = valid & (cos_i > 0.0)
@@ -165,10 +172,24 @@ def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, 
                 k = kernels.rd_dipole(np.linalg.norm(xo[:, None] - xi, axis=-1)[..., None], ms) / np.pi
             else:
                 b = lambda a: np.broadcast_to(a[:, None], xi.shape)                        # noqa: E731
-                k = kernels.dirpole_sd(xi, np.where(use[..., None], ni, b(no)), np.where(use[..., None], wi, b(wl)),
-                                       b(xo), b(no), ms)
-            out += np.sum(np.where(use[..., None], k, 0.0) * e[..., None], axis=1) * I / frames
-    return out, amb
+                k = kernels.dirpole_sd(np.where(use[..., None], xi, b(xo) - b(no)), np.where(use[..., None], ni, b(no)),
+                                       np.where(use[..., None], wi, b(wl)), b(xo), b(no), ms)
+            return np.where(use[..., None], k, 0.0) * e[..., None] * I
+
+        for phi in rotations(frames):
+            rot = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+            # the shader's angle j GOLDEN_ANGLE + phi: the spiral rotated by phi
+            uj = uv[:, None, :] + r_uv[:, None, None] * (pts @ rot.T)[None]              # (P, k, 2)
+            f = uj * S
+            tj = np.floor(f).astype(np.int64)
+            near = _edge(f, EDGE_SAMPLE)
+            c0 = contribution(uj, tj)
+            out += np.sum(c0, axis=1) / frames
+            if near.any():
+                alt = tj + np.where(near, np.where(f - tj < 0.5, -1, 1), 0)
+                diff = np.abs(contribution(uj, alt) - c0) * np.any(near, axis=-1)[..., None]
+                slack += np.sum(diff, axis=1) / frames
+    return out, amb, slack
 
 
 def combine(gpos, gnrm, face_pos_valid, face_z, accum, cube, face_size, eps_c, eps_b, cam_pos, eta):
@@ -197,7 +218,7 @@ def combine(gpos, gnrm, face_pos_valid, face_z, accum, cube, face_size, eps_c, e
         d_face = 0.5 * (f_ - n_) * (2.0 * z - 1.0 + (f_ + n_) / (f_ - n_))               # Sec. 4.3.3
         d_point = (xs - face.eye) @ face.dir
         vis = cov & (d_point < d_face + eps_b)
-        amb |= inb & (np.any(_edge(uv * N), axis=1) | (cov & (np.abs(d_point - d_face - eps_b) < 1e-4 * cube.half)))
+        amb |= inb & (np.any(_edge(uv * N, EDGE), axis=1) | (cov & (np.abs(d_point - d_face - eps_b) < 1e-4 * cube.half)))
         total += np.where(vis[:, None], accum[tc[:, 1], col], 0.0)
         count += vis
     wo = np.asarray(cam_pos, np.float64) - x
