@@ -7,7 +7,11 @@ texels x lights x k x F), relMSE of the subsurface image against the dense one o
 the energy ratio (sum over those pixels), the time of one frame (one rotation's gather plus the combination,
 host ms) and the whole gather. The dense gather's own work and time are in the table's first row per kernel.
 
-    .venv/bin/python benchmarks/cubemap_convergence.py [--scenes a,b,c] [--budgets 8x1,32x8,...] [--write]
+A second table renders every suite scene at one budget (``--suite``), both kernels: sizes, times and the
+self-check (no dense comparison: the dense gather takes minutes on ``marble_sphere``).
+
+    .venv/bin/python benchmarks/cubemap_convergence.py [--scenes a,b,c] [--budgets 8x1,32x8,...] [--suite 512x4]
+                                                        [--write]
 """
 
 import argparse
@@ -21,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from page import Page  # noqa: E402
 
 from harness.regression.accuracy import small_scene  # noqa: E402
+from harness.scene import list_scenes  # noqa: E402
 from dipole_gl.params import DipoleParams  # noqa: E402
 from dipole_gl.renderer import DipoleRenderer  # noqa: E402
 
@@ -41,8 +46,11 @@ def main(argv=None):
     ap.add_argument("--scenes", default=SCENES, help=f"comma-separated suite scenes (default {SCENES})")
     ap.add_argument("--budgets", default=BUDGETS, help=f"samples x frames, comma-separated (default {BUDGETS})")
     ap.add_argument("--kernels", default="dipole,dirpole")
+    ap.add_argument("--suite", default="512x4", help="one budget k x F to render every suite scene at, both kernels "
+                    "(default 512x4; 'none' to skip)")
     ap.add_argument("--write", action="store_true", help="write docs/benchmarks/cubemap_convergence.md")
     args = ap.parse_args(argv)
+    args.suite = None if args.suite == "none" else args.suite
     page = Page("cubemap_convergence", "The cubemap gather converging to the dense gather")
     renderer = DipoleRenderer()
     page.gl_renderer = renderer.gl_renderer
@@ -59,12 +67,11 @@ def main(argv=None):
         for name in args.scenes.split(","):
             scene = small_scene(name)
             for kernel in args.kernels.split(","):
-                t = time.perf_counter()
                 dense = renderer.render(scene, kernel, DipoleParams(spacing=1.0))
-                wall = (time.perf_counter() - t) * 1e3
-                rows.append([name, kernel, "dense", "-", f"{dense.work['gather']:,}", "0", "1", f"{wall:.0f}",
+                frame = sum(dense.timings_ms.values())
+                rows.append([name, kernel, "dense", "-", f"{dense.work['gather']:,}", "0", "1", f"{frame:.0f}",
                              f"{dense.timings_ms['gather']:.0f}"])
-                print(f"  {name} {kernel} dense {wall:.0f} ms", file=sys.stderr, flush=True)
+                print(f"  {name} {kernel} dense {frame:.0f} ms", file=sys.stderr, flush=True)
                 for k, frames in _budgets(args.budgets):
                     res = renderer.render(scene, kernel, DipoleParams(gather="cubemap", samples=k, frames=frames))
                     m = res.mask & dense.mask
@@ -74,9 +81,36 @@ def main(argv=None):
                                  f"{a.sum() / b.sum():.3f}", f"{res.info['ms_per_frame']:.0f}",
                                  f"{res.timings_ms['gather']:.0f}"])
                     print(f"  {name} {kernel} {k}x{frames} relMSE {rel:.4f}", file=sys.stderr, flush=True)
+        page.table(header, rows, note="The dense gather's ms per frame: the sum of its frame's stages.")
+        if args.suite:
+            k, frames = _budgets(args.suite)[0]
+            page.heading(f"Every suite scene at k x F = {k} x {frames}")
+            page.para("Each suite scene at its committed small size with both kernels at this budget, the other "
+                      "settings at their defaults (no comparison with the dense gather, which takes minutes on "
+                      "marble_sphere): the face texels, the gather's work and dispatches, one frame's ms, the whole "
+                      "frame's stages (all F rotations) and the render's self-check against the twin.")
+            suite = []
+            for name in list_scenes():
+                scene = small_scene(name)
+                for kernel in args.kernels.split(","):
+                    t = time.perf_counter()
+                    try:
+                        res = renderer.render(scene, kernel, DipoleParams(gather="cubemap", samples=k, frames=frames))
+                    except Exception as exc:  # noqa: BLE001 -- the table reports every failure
+                        suite.append([name, kernel, f"failed: {type(exc).__name__}: {str(exc).splitlines()[0]}",
+                                      "", "", "", "", "", ""])
+                        continue
+                    wall = time.perf_counter() - t
+                    i = res.info
+                    suite.append([name, kernel, f"{i['face_texels']:,}", f"{res.work['gather']:,}",
+                                  str(i["dispatches"]), f"{i['ms_per_frame']:.0f}",
+                                  f"{sum(res.timings_ms.values()):.0f}", f"{i['check']['max_rel_diff']:.1e}",
+                                  f"{wall:.1f}"])
+                    print(f"  suite {name} {kernel} {wall:.1f} s", file=sys.stderr, flush=True)
+            page.table(["scene", "kernel", "face texels", "work", "dispatches", "ms per frame", "frame ms (all F)",
+                        "check: max diff", "wall s"], suite)
     finally:
         renderer.release()
-    page.table(header, rows)
     page.finish(args.write)
 
 
