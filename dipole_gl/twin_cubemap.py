@@ -13,6 +13,10 @@
      - the first surface point along each texel centre's ray (perspective from a light, or
        orthographic from a face): position, normal, coverage, window depth; ray against every
        triangle (Moeller-Trumbore), the vertex normals interpolated
+   * - :func:`closest_point`
+     - ``cubemap_gather.comp`` (its first lookup)
+     - Ch. 4.1, Fig. 4.3, Sec. 4.3.1
+     - the light-buffer texel of the point moved by ``eps_g``, and the depth of the point closest to the light
    * - :func:`gather`
      - ``cubemap_gather.comp``
      - Ch. 4.1, Step 2 (the sum for ``C^f``), Sec. 4.3.1
@@ -40,7 +44,7 @@ from . import kernels
 from .cubemap_geometry import disc, rotations
 from .twin import exit_coefficients
 
-__all__ = ["raycast", "gather", "combine", "light_axis", "EDGE", "EDGE_SAMPLE"]
+__all__ = ["raycast", "closest_point", "gather", "combine", "light_axis", "EDGE", "EDGE_SAMPLE"]
 
 #: A lookup with ``uv N`` within this many texels of a texel edge is ambiguous between float32 and float64
 #: (the disc's centre, a face texel in the combination): such a point is left out of a comparison.
@@ -106,6 +110,32 @@ def _edge(x, tol):
     return np.abs(x - np.round(x)) < tol
 
 
+def closest_point(xo, no, light_pos, view, axis, lb_pos, lb_valid, eps_g):
+    """The disc's centre for exit points ``xo`` (P, 3) in one light's buffer (``lb_pos`` (S, S, 3), ``lb_valid``):
+    ``(uv (P, 2), found (P,), depth (P,), ambiguous (P,))`` (thesis Fig. 4.3, Sec. 4.3.1).
+
+    ``x'_o = x_o - eps_g (n_o - w_l (w_l . n_o))`` (``eps_g`` in texels at ``x_o``'s depth along the light's
+    ``axis``) projected with the light's matrix; ``found``: the texel there is covered, and ``depth`` is then
+    the depth of the point it holds (``x_o^T``), else ``x_o``'s own.
+    """
+    S = lb_pos.shape[0]
+    L = np.asarray(light_pos, np.float64)
+    th = float(view.tan_half)
+    wl = L - xo
+    wl /= np.linalg.norm(wl, axis=1, keepdims=True)
+    depth_o = (xo - L) @ axis
+    eps = eps_g * 2.0 * th / S * depth_o
+    xs = xo - eps[:, None] * (no - wl * np.sum(wl * no, axis=1, keepdims=True))           # Sec. 4.3.1
+    clip = np.concatenate([xs, np.ones((len(xo), 1))], axis=1) @ view.view_proj.T
+    uv = clip[:, :2] / clip[:, 3:4] * 0.5 + 0.5
+    tc = np.floor(uv * S).astype(np.int64)
+    inside = np.all((tc >= 0) & (tc < S), axis=1)
+    tcc = np.clip(tc, 0, S - 1)
+    found = inside & lb_valid[tcc[:, 1], tcc[:, 0]]
+    depth = np.where(found, (lb_pos[tcc[:, 1], tcc[:, 0]] - L) @ axis, depth_o)
+    return uv, found, depth, np.any(_edge(uv * S, EDGE), axis=1)
+
+
 def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, axes, mat, eta, samples, frames,
            disc_radius, eps_g):
     """``(C (P, 3), ambiguous (P,), slack (P, 3))``: the face texels' gathered radiance over ``frames`` rotations.
@@ -136,18 +166,9 @@ def gather(kernel, exit_pos, exit_nrm, lb_pos, lb_nrm, lb_valid, lights, views, 
         th = float(view.tan_half)
         wl = L - xo
         wl /= np.linalg.norm(wl, axis=1, keepdims=True)
-        depth_o = (xo - L) @ ax
-        eps = eps_g * 2.0 * th / S * depth_o
-        xs = xo - eps[:, None] * (no - wl * np.sum(wl * no, axis=1, keepdims=True))       # Sec. 4.3.1
-        clip = np.concatenate([xs, np.ones((P, 1))], axis=1) @ view.view_proj.T
-        uv = clip[:, :2] / clip[:, 3:4] * 0.5 + 0.5
-        amb |= np.any(_edge(uv * S, EDGE), axis=1)
-        tc = np.floor(uv * S).astype(np.int64)
-        inside = np.all((tc >= 0) & (tc < S), axis=1)
-        tcc = np.clip(tc, 0, S - 1)
-        col = tcc[:, 0] + l * S
-        ok = inside & lb_valid[tcc[:, 1], col]
-        depth = np.where(ok, (lb_pos[tcc[:, 1], col] - L) @ ax, depth_o)                  # x_o^T's depth
+        uv, ok, depth, edge = closest_point(xo, no, L, view, ax, lb_pos[:, l * S:(l + 1) * S], lb_valid[:, l * S:(l + 1) * S],
+                                            eps_g)
+        amb |= edge
         r_uv = disc_radius / (2.0 * th * depth)
         plane = np.pi / samples * r_uv**2 * 4.0 * th * th                                # (P,)
 

@@ -5,7 +5,8 @@
   the NumPy twin, both kernels, on a two-light scene and behind a dielectric;
 * a gather whose single dispatch would exceed llvmpipe's 65,535 loop iterations, against the twin;
 * the render's self-check refusing a gather that is off by 1 %;
-* the depth bias's derived default: every covered pixel is seen by at least one face;
+* the derived defaults of the fixes: eps_g finds every lit point in the light buffer, eps_b lets a face see
+  every pixel whose best-aligned face is unoccluded;
 * convergence to the dense gather of the same kernel as samples and frames grow.
 
 Tolerances: GL (float32) against the twin (float64) ``max |GL - twin| <= 1e-4 max |twin|`` as in
@@ -81,7 +82,7 @@ def test_raster_passes_match_a_ray_caster(renderer):
     """Light buffer (perspective from the light) and the six faces (orthographic, with z_tex): the first hit of
     each texel centre's ray; coverage may differ only on texels whose centre lies on a triangle's edge."""
     scene = load_scene("skin_torus").with_resolution(16, 16)
-    params = _params(cube_size=24, light_size=32)
+    params = _params(cube_size=16, light_size=32)
     raw = renderer.render(scene, "dipole", params, debug=True).debug
     views = light_views(scene)[0]
     size = scene.mesh.vertices.max(0) - scene.mesh.vertices.min(0)
@@ -192,6 +193,45 @@ def test_default_depth_bias_lets_a_face_see_every_pixel(renderer, name, size):
     print(f"{name}: visible faces per pixel {np.bincount(count.astype(int))}; best face occluded: {np.sum(~seen)}")
     assert seen.mean() > 0.9
     assert np.all(count[seen] > 0)
+
+
+@pytest.mark.parametrize("name", ["sphere_homogeneous", "skin_torus"])
+def test_default_eps_g_finds_every_lit_point_in_the_light_buffer(renderer, name):
+    """The default eps_g (``dipole_gl.cubemap_geometry``): every face texel that the light reaches (facing it, the
+    segment to the light unoccluded, by the ray caster) finds a covered light-buffer texel at its disc's centre,
+    holding a point within a few texels of itself; without the fix (eps_g = 0) points on the light's silhouette
+    miss."""
+    scene = load_scene(name).with_resolution(16, 16)
+    params = _params(cube_size=24, light_size=64, samples=1, frames=1)
+    raw = renderer.render(scene, "dipole", params, debug=True).debug
+    rows, cols = np.nonzero(raw["face_pos"][..., 3] > 0.5)
+    x = raw["face_pos"][rows, cols, :3].astype(np.float64)
+    n = raw["face_nrm"][rows, cols, :3].astype(np.float64)
+    L = np.asarray(scene.lights[0].position, np.float64)
+    to = L - x
+    dist = np.linalg.norm(to, axis=1)
+    _, _, hit, t = twin_cubemap.raycast(scene.mesh, x + 1e-4 * dist[:, None] * n, to / dist[:, None])
+    lit = (np.sum(to * n, axis=1) > 0) & ~(hit & (t < dist))
+    view = light_views(scene)[0][0]
+    axis = _axes(scene)[0]
+    S = params.light_size
+    lb = raw["lb_pos"][:, :S]
+    misses = {}
+    for eps in (params.eps_g, 0.0):
+        uv, found, depth, _ = twin_cubemap.closest_point(x[lit], n[lit], L, view, axis, lb[..., :3], lb[..., 3] > 0.5,
+                                                         eps)
+        misses[eps] = int(np.sum(~found))
+        if eps == params.eps_g:
+            texel = 2.0 * view.tan_half * ((x[lit] - L) @ axis) / S
+            tc = np.clip(np.floor(uv * S).astype(int), 0, S - 1)
+            d = lb[tc[:, 1], tc[:, 0], :3] - x[lit]
+            ray = (x[lit] - L) / np.linalg.norm(x[lit] - L, axis=1, keepdims=True)
+            side = np.linalg.norm(d - np.sum(d * ray, axis=1, keepdims=True) * ray, axis=1) / texel
+            print(f"{name}: {lit.sum()} lit face texels; x_o^T within {side[found].max():.2f} texels across the ray")
+            assert side[found].max() <= np.sqrt(0.5) + params.eps_g + 0.1      # half a diagonal plus the move
+    print(f"{name}: misses with eps_g = {params.eps_g}: {misses[params.eps_g]}, with 0: {misses[0.0]}")
+    assert misses[params.eps_g] == 0
+    assert misses[0.0] > 0
 
 
 def _rel_mse(a, b, mask):
