@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from page import Page  # noqa: E402
 
 from harness.regression.accuracy import small_scene  # noqa: E402
+from harness.methods import get_method  # noqa: E402
 from harness.scene import list_scenes  # noqa: E402
 from dipole_gl.params import DipoleParams  # noqa: E402
 from dipole_gl.renderer import DipoleRenderer  # noqa: E402
@@ -88,10 +89,18 @@ def main(argv=None):
             page.para("Each suite scene at its committed small size with both kernels at this budget, the other "
                       "settings at their defaults (no comparison with the dense gather, which takes minutes on "
                       "marble_sphere): the face texels, the gather's work and dispatches, one frame's ms, the whole "
-                      "frame's stages (all F rotations) and the render's self-check against the twin.")
+                      "frame's stages (all F rotations) and the render's self-check against the twin; beside them SSLPV at the "
+                      "study's N = 32, K = 32 (diffusion mapping): its propagation's cell updates and its frame "
+                      "(RSM, injection, propagation, shading).")
             suite = []
+            sslpv = get_method("sslpv")
             for name in list_scenes():
                 scene = small_scene(name)
+                t = time.perf_counter()
+                res = sslpv.render(scene, sslpv.make_params(N=32, steps=32, mapping="diffusion"))
+                suite.append([name, "sslpv N 32, K 32", "-", f"{res.work['propagation']:,} cell updates", "-",
+                              f"{sum(res.timings_ms.values()):.0f}", f"{sum(res.timings_ms.values()):.0f}", "-",
+                              f"{time.perf_counter() - t:.1f}"])
                 for kernel in args.kernels.split(","):
                     t = time.perf_counter()
                     try:
@@ -111,6 +120,7 @@ def main(argv=None):
                         "check: max diff", "wall s"], suite)
     finally:
         renderer.release()
+        get_method("sslpv").release()
     page.finish(args.write)
 
 
