@@ -85,6 +85,21 @@ def _vertex(kernel, chunked):
     return f
 
 
+CUBE_K = DipoleParams(gather="cubemap").samples
+
+
+def _cubemap(kernel, chunked):
+    """Iterations of one cubemap-gather invocation at the default k (``dipole_gl.cubemap.gather_chunk``)."""
+    per = 1 + (C if kernel == "dirpole" else 0)
+
+    def f(fig):
+        from dipole_gl.cubemap import gather_chunk
+
+        n = CUBE_K if not chunked else min(CUBE_K, gather_chunk(kernel, fig["L"]))
+        return fig["L"] * (1 + n * per)
+    return f
+
+
 def loops(figs):
     """Each known loop: (file, text that identifies its line, what it is, bound, one dispatch, chunked, chunked?)."""
     L = lambda fig: fig["L"]                                                          # noqa: E731
@@ -114,6 +129,14 @@ def loops(figs):
          "vertex gather: neighbours x lights x kernel (dirpole)", f"row (1 + L (1 + {C}))",
          _largest(figs, _vertex("dirpole", False)), _largest(figs, _vertex("dirpole", True)),
          "yes (a row can exceed the budget)"),
+        ("dipole_gl/shaders/cubemap_gather.comp", "for (int l = 0; l < u_n_lights; ++l) {\n        vec3 wl",
+         "cubemap gather: lights", "L <= 8", _largest(figs, L), None, "no"),
+        ("dipole_gl/shaders/cubemap_gather.comp", "for (int j = u_first; j < u_end; ++j)",
+         f"cubemap gather: lights x disc samples x kernel (dirpole, default k = {CUBE_K})", f"L (1 + k (1 + {C}))",
+         _largest(figs, _cubemap("dirpole", False)), _largest(figs, _cubemap("dirpole", True)),
+         "yes (k up to 65,536)"),
+        ("dipole_gl/shaders/cubemap_combine.comp", "for (int f = 0; f < 6; ++f)",
+         "cubemap combination: the six faces", "6", (6, "all"), None, "no"),
         ("dipole_gl/shaders/kernels.glsl", "for (int k = 0; k < 3; ++k)",
          "dirpole_sd: the three colours", "3", (3, "all"), None, f"no: counted as {C} per call"),
         ("dipole_gl/shaders/single.comp", "for (int k = 0; k < u_n_march; ++k)",

@@ -9,14 +9,23 @@ never carries a setting that does nothing. Bad values raise
 =================  =========  ==========================================================
 field              gather     meaning
 =================  =========  ==========================================================
-``gather``         both       ``dense`` (whole surface) or ``vertex`` (Hao & Varshney)
+``gather``         all        ``dense`` (whole surface), ``vertex`` (Hao & Varshney) or
+                              ``cubemap`` (the thesis draft's real-time directional dipole)
 ``spacing``        dense      surface sample spacing, in reduced mean free paths
                               ``l' = 1/sigma_t'`` (default 1)
 ``range``          vertex     neighbourhood radius, in diffusion lengths ``1/sigma_tr``
                               (default 4)
 ``density``        vertex     scattering vertices per ``l'^2`` (default 1)
-``shadow_size``    both       shadow-map resolution per light (default 1024)
-``fit``            both       ``refuse`` (default) or ``coarsen``: a setting over the
+``cube_size``      cubemap    texels per cube-face side (default 64)
+``light_size``     cubemap    light-buffer texels per side, per light (default 256)
+``samples``        cubemap    disc samples per face texel, light and frame (default 32)
+``frames``         cubemap    disc rotations accumulated while static (default 8)
+``disc_radius``    cubemap    the disc's world radius, in diffusion lengths (default 4)
+``eps_g``          cubemap    G-buffer fix, light-buffer texels (default 0.75)
+``eps_c``          cubemap    cubemap fix, cube texels (default 0.75)
+``eps_b``          cubemap    depth bias, cube texels (default 2.5)
+``shadow_size``    all        shadow-map resolution per light (default 1024)
+``fit``            all        ``refuse`` (default) or ``coarsen``: a setting over the
                               gather's budget is refused, or coarsened just enough
                               (:mod:`dipole_gl.sizing`)
 ``terms``          both       ``both`` (default: Jensen et al. 2001's ``S_d + S^(1)``),
@@ -26,7 +35,9 @@ field              gather     meaning
 
 ``l'`` is the smallest reduced mean free path of the medium (largest ``sigma_t'`` over
 colours and the voxels inside the mesh) and ``1/sigma_tr`` the largest diffusion length,
-so a setting is at least as fine, and a range at least as wide, in every colour.
+so a setting is at least as fine, and a range at least as wide, in every colour. The cubemap
+gather's defaults of ``eps_g``, ``eps_c`` and ``eps_b`` are derived in
+:mod:`dipole_gl.cubemap_geometry`; ``fit = coarsen`` leaves its settings as given.
 """
 
 from __future__ import annotations
@@ -37,16 +48,26 @@ from dataclasses import dataclass, field
 
 from harness.errors import InputError
 
-__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS", "DEFAULTS"]
+from .cubemap_geometry import EPS_B, EPS_C, EPS_G
+
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS", "DEFAULTS", "LIMITS"]
 
 KERNELS = ("dipole", "dirpole")
-GATHERS = ("dense", "vertex")
+GATHERS = ("dense", "vertex", "cubemap")
 #: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
 FITS = ("refuse", "coarsen")
 #: Which terms of the BSSRDF a render adds (``both`` is the default, as Jensen et al. 2001 render it).
 TERMS = ("diffusion", "single", "both")
 #: gather -> the parameters that belong to it alone, with their defaults
-GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0}}
+GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0},
+                 "cubemap": {"cube_size": 64, "light_size": 256, "samples": 32, "frames": 8, "disc_radius": 4.0,
+                             "eps_g": EPS_G, "eps_c": EPS_C, "eps_b": EPS_B}}
+#: name -> (lowest, highest, lowest allowed, integer)
+LIMITS = {"spacing": (0.05, 10.0, True, False), "range": (0.0, 100.0, False, False),
+          "density": (0.01, 100.0, True, False), "cube_size": (8, 2048, True, True),
+          "light_size": (16, 4096, True, True), "samples": (1, 65536, True, True), "frames": (1, 4096, True, True),
+          "disc_radius": (0.0, 100.0, False, False), "eps_g": (0.0, 16.0, True, False),
+          "eps_c": (0.0, 16.0, True, False), "eps_b": (0.0, 64.0, True, False)}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
 
 
@@ -58,14 +79,31 @@ def _p(default, doc):
 class DipoleParams:
     """Settings of the ``dipole`` and ``dirpole`` methods (see the module docstring)."""
 
-    gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling) "
-                              "or vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors)")
+    gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling), "
+                              "vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors) or "
+                              "cubemap (the thesis draft: light buffer, six cube faces, disc samples, frames)")
     spacing: float | None = _p(None, "gather=dense: sample spacing in reduced mean free paths 1/sigma_t' "
                                      "(default 1), in [0.05, 10]")
     range: float | None = _p(None, "gather=vertex: effective scattering range in diffusion lengths 1/sigma_tr "
                                    "(default 4), in (0, 100]")
     density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
                                      "(default 1), in [0.01, 100]")
+    cube_size: int | None = _p(None, "gather=cubemap: texels per side of each of the six cube faces (default 64), "
+                                     "in [8, 2048]")
+    light_size: int | None = _p(None, "gather=cubemap: light-buffer texels per side, per light (default 256), "
+                                      "in [16, 4096]")
+    samples: int | None = _p(None, "gather=cubemap: disc samples in the light buffer per face texel, light and "
+                                   "frame (default 32), in [1, 65536]")
+    frames: int | None = _p(None, "gather=cubemap: disc rotations accumulated while the scene is static "
+                                  "(default 8), in [1, 4096]")
+    disc_radius: float | None = _p(None, "gather=cubemap: the disc's world radius in diffusion lengths 1/sigma_tr "
+                                         "(default 4), in (0, 100]")
+    eps_g: float | None = _p(None, "gather=cubemap: the G-buffer fix (thesis Sec. 4.3.1) in light-buffer texels "
+                                   "(default 0.75), in [0, 16]")
+    eps_c: float | None = _p(None, "gather=cubemap: the cubemap fix (thesis Sec. 4.3.2) in cube texels "
+                                   "(default 0.75), in [0, 16]")
+    eps_b: float | None = _p(None, "gather=cubemap: the depth bias (thesis Sec. 4.3.3) in cube texels "
+                                   "(default 2.5), in [0, 64]")
     shadow_size: int = _p(1024, "shadow-map resolution per light (visibility of the irradiance), in [16, 8192]")
     fit: str | None = _p(None, "a spacing (dense) or vertex density (vertex) over the gather's budget: refuse "
                                "(default) or coarsen it just enough to fit (the value used is in the result)")
@@ -88,16 +126,15 @@ class DipoleParams:
         for name, default in mine.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, default)
-        limits = {"spacing": (0.05, 10.0, True), "range": (0.0, 100.0, False), "density": (0.01, 100.0, True)}
         for name in mine:
             v = getattr(self, name)
-            lo, hi, lo_closed = limits[name]
-            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and \
-                (v >= lo if lo_closed else v > lo) and v <= hi
+            lo, hi, lo_closed, integer = LIMITS[name]
+            ok = isinstance(v, int if integer else (int, float)) and not isinstance(v, bool) and math.isfinite(v) \
+                and (v >= lo if lo_closed else v > lo) and v <= hi
             if not ok:
-                bad(name, f"must be a number in {'[' if lo_closed else '('}{lo:g}, {hi:g}], got {v!r}",
-                    "change the value")
-            object.__setattr__(self, name, float(v))
+                bad(name, f"must be {'an integer' if integer else 'a number'} in {'[' if lo_closed else '('}"
+                    f"{lo:g}, {hi:g}], got {v!r}", "change the value")
+            object.__setattr__(self, name, int(v) if integer else float(v))
         if self.fit not in (None,) + FITS:
             bad("fit", f"unknown value {self.fit!r}", "use one of: " + ", ".join(FITS))
         if self.fit == "refuse":                       # the default: left out of the label

@@ -73,7 +73,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, gbuffer, irradiance, shade, single, sizing
+from . import check, cubemap, gbuffer, irradiance, shade, single, sizing
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -88,13 +88,15 @@ N_RAD = len(radial_nodes()[0])
 
 #: Frame stages per gather, in order.
 STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather", "single"),
-          "vertex": ("shadow", "irradiance", "gather", "shading", "gbuffer", "single")}
+          "vertex": ("shadow", "irradiance", "gather", "shading", "gbuffer", "single"),
+          "cubemap": (*cubemap.STAGES, "single")}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
               "shading": "pixels + display vertices", "single": "march nodes x lights (covered pixels)",
               "material": "voxels", "sampling": "surface samples",
-              "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices"}
+              "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices",
+              "lightbuffer": "light-buffer texels", "cubemap": "cube-face texels", "combine": "pixels"}
 
 
 @dataclass
@@ -150,7 +152,10 @@ class DipoleRenderer:
                      "vertex": lambda w: gathers.build_vertex(self.ctx, key[1], w),
                      "display": lambda w: gathers.build_display(self.ctx, w),
                      "shade": lambda w: shade.build_program(self.ctx, w),
-                     "single": lambda w: single.build_program(self.ctx, w)}[key[0]]
+                     "single": lambda w: single.build_program(self.ctx, w),
+                     "cube_face": lambda w: cubemap.build_face(self.ctx, w),
+                     "cube_gather": lambda w: cubemap.build_gather(self.ctx, key[1], w),
+                     "cube_combine": lambda w: cubemap.build_combine(self.ctx, w)}[key[0]]
             prog = build(self.warnings)
             self._programs[key] = prog
         return prog
@@ -243,7 +248,21 @@ class DipoleRenderer:
         if params.terms == "single":
             return self._render_single_only(scene, params, mat, medium, views, shadow_tex, centre, radius, timer,
                                             work, info, pre_ms, pre_work, warnings, dbg)
-        if params.gather == "dense":
+        if params.gather == "cubemap":
+            sub, full, mask, more, extra, dbg = cubemap.render(self, scene, kernel, params, mat, medium, views,
+                                                                shadow_tex, centre, radius, timer, debug)
+            work.update(more)
+            info.update(extra)
+            if params.terms == "both":           # S^(1) on the cubemap's G-buffer, added to its (checked) output
+                W, H = scene.camera.width, scene.camera.height
+                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+                out = self._targets.get("dipole_cubemap_out", (W, H), 2)
+                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
+                             add=True)
+                sub, full = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
+                if debug:
+                    dbg["single_pass"] = self._last_single
+        elif params.gather == "dense":
             spacing = params.spacing
             if params.fit == "coarsen":
                 spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing, W * H)
