@@ -641,4 +641,11 @@ MUTATIONS = (
              "    keep = 1.0 - f ",
              ("tests/test_delta_eddington.py",),
              "delta-Eddington: sigma_t scaled by (1 - f) instead of (1 - a f), so absorption is no longer kept"),
+    Mutation("cubemap_both_without_single", "glsl", "dipole_gl/renderer.py",
+             "self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],\n"
+             "                             add=True)",
+             "self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],\n"
+             "                             add=False)",
+             ("tests/test_dipole_single.py::test_both_adds_single_to_the_gathers",),
+             "the cubemap gather under terms = both computes S1 but leaves it out of the image"),
 )
