@@ -253,7 +253,7 @@ def test_a_changed_study_is_not_served_as_it_is(tmp_path):
 def test_headline_table_and_limits(runs):
     head, lims = runs["built"]["head"], runs["built"]["limits"]
     assert head["scenes"] == ["thin_ring", "wide_slab"]
-    assert head["families"] == ["collision", "diffusion", "dipole dense"]
+    assert head["families"] == ["collision", "diffusion", "dipole dense + S1"]
     for scene in head["scenes"]:
         cells = head["overall"][scene]
         statuses = [c["status"] for c in cells.values()]

@@ -30,10 +30,14 @@ BASE_COLUMNS = ("scene", "method", "family", "setting", "N", "K", "steps_used", 
 
 def family_of(method, params):
     """The family a configuration competes in: SSLPV's mapping (``calibrated diffusion`` for a calibrated
-    file of that family), a rival's method and gather (``dipole dense``)."""
+    file of that family), a rival's method and gather (``dipole dense``), with ``S1`` where it adds Jensen
+    et al.'s single scattering (``dipole dense + S1``, ``terms = both``; ``dipole dense S1 only`` for
+    ``terms = single``)."""
     if method == "sslpv":
         return study_label(params.get("mapping"))
-    return f"{method} {params.get('gather', '')}".strip()
+    terms = params.get("terms", "diffusion")
+    suffix = {"both": " + S1", "single": " S1 only"}.get(terms, "")
+    return f"{method} {params.get('gather', '')}".strip() + suffix
 
 
 def _k(params):
