@@ -2,8 +2,9 @@
 
 One process, one GL context per renderer, each scene of the suite at ``--size``: SSLPV at the paper's
 configuration (N = 32, K = 32, ``--sslpv-mapping``), then the dipole rivals (dense gather at its default spacing,
-vertex gather at density 0.5 and range 2, both under the sizing rule ``fit = coarsen``
-(``dipole_gl.sizing``), as in the nightly matrix). Precomputation = the method's precomputation steps (host ms, measured when they were made: the
+vertex gather at density 0.5 and range 2, the cubemap gather at 512 disc samples over 4 frames, all under the
+sizing rule ``fit = coarsen`` (``dipole_gl.sizing``) and with the method's default terms (diffusion plus single
+scattering), as in the nightly matrix). Precomputation = the method's precomputation steps (host ms, measured when they were made: the
 first render of a configuration); per frame = the sum of the frame stages (GL ms; host ms where the driver's
 timer queries miss compute work, ``dipole_gl/timing.py``), the median of ``--repeat`` renders after that.
 
@@ -32,7 +33,9 @@ from harness.scene import list_scenes, load_scene
 CONFIGS = [("dipole", {"gather": "dense", "fit": "coarsen"}),
            ("dipole", {"gather": "vertex", "density": 0.5, "range": 2.0, "fit": "coarsen"}),
            ("dirpole", {"gather": "dense", "fit": "coarsen"}),
-           ("dirpole", {"gather": "vertex", "density": 0.5, "range": 2.0, "fit": "coarsen"})]
+           ("dirpole", {"gather": "vertex", "density": 0.5, "range": 2.0, "fit": "coarsen"}),
+           ("dipole", {"gather": "cubemap", "samples": 512, "frames": 4, "fit": "coarsen"}),
+           ("dirpole", {"gather": "cubemap", "samples": 512, "frames": 4, "fit": "coarsen"})]
 
 
 def frame_ms(method, scene, params, repeat):
@@ -47,8 +50,13 @@ def frame_ms(method, scene, params, repeat):
 def sizing_row(name, kernel, gather, first, wall):
     """The sizing table's row: what the rule chose and what the first render did."""
     i = first.info
-    used = f"spacing {i['spacing_used']:g}" if gather == "dense" else f"density {i['density_used']:g}"
-    size = f"{i['samples']:,} samples" if gather == "dense" else f"{i['vertices']:,} vertices, {i['pairs']:,} pairs"
+    if gather == "cubemap":
+        used = f"{i['samples']} samples x {i['frames']} frames"
+        size = f"{i['face_texels']:,} face texels"
+    elif gather == "dense":
+        used, size = f"spacing {i['spacing_used']:g}", f"{i['samples']:,} samples"
+    else:
+        used, size = f"density {i['density_used']:g}", f"{i['vertices']:,} vertices, {i['pairs']:,} pairs"
     c = i["check"]
     return (f"| {name} | {kernel} | {gather} | {used} | {size} | {i['dispatches']} | "
             f"{sum(first.timings_ms.values()) / 1e3:.2f} | {sum(first.precompute_ms.values()) / 1e3:.2f} | "
@@ -90,7 +98,7 @@ def main():
                           if isinstance(v, tuple)), file=sys.stderr, flush=True)
     keys = [f"{k}-{kw['gather']}" for k, kw in CONFIGS]
     print(f"\nratios to SSLPV's per-frame time (N32 K32 {args.sslpv_mapping}), size {args.size}, median of {args.repeat} frames, "
-          f"one run of {time.perf_counter() - t0:.0f} s")
+          f"one run of {time.perf_counter() - t0:.0f} s\n")
     print("| scene | SSLPV ms/frame | " + " | ".join(f"{k} precomp. / frame" for k in keys) + " |")
     print("|---|---|" + "---|" * len(keys))
     for r in rows:
