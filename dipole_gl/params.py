@@ -9,14 +9,17 @@ never carries a setting that does nothing. Bad values raise
 =================  =========  ==========================================================
 field              gather     meaning
 =================  =========  ==========================================================
-``gather``         both       ``dense`` (whole surface) or ``vertex`` (Hao & Varshney)
-``spacing``        dense      surface sample spacing, in reduced mean free paths
-                              ``l' = 1/sigma_t'`` (default 1)
+``gather``         all        ``dense`` (whole surface), ``vertex`` (Hao & Varshney) or
+                              ``hierarchical`` (Jensen & Buhler's octree)
+``spacing``        dense,     surface sample spacing, in reduced mean free paths
+                   hierarch.  ``l' = 1/sigma_t'`` (default 1)
+``epsilon``        hierarch.  the octree's solid-angle bound: a node subtending less than
+                              ``epsilon`` sr is used whole (default :data:`DEFAULT_EPSILON`)
 ``range``          vertex     neighbourhood radius, in diffusion lengths ``1/sigma_tr``
                               (default 4)
 ``density``        vertex     scattering vertices per ``l'^2`` (default 1)
-``shadow_size``    both       shadow-map resolution per light (default 1024)
-``fit``            both       ``refuse`` (default) or ``coarsen``: a setting over the
+``shadow_size``    all        shadow-map resolution per light (default 1024)
+``fit``            all        ``refuse`` (default) or ``coarsen``: a setting over the
                               gather's budget is refused, or coarsened just enough
                               (:mod:`dipole_gl.sizing`)
 =================  =========  ==========================================================
@@ -34,14 +37,17 @@ from dataclasses import dataclass, field
 
 from harness.errors import InputError
 
-__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "GATHER_FIELDS", "DEFAULTS"]
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "GATHER_FIELDS", "DEFAULTS", "DEFAULT_EPSILON"]
 
 KERNELS = ("dipole", "dirpole")
-GATHERS = ("dense", "vertex")
+GATHERS = ("dense", "vertex", "hierarchical")
 #: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
 FITS = ("refuse", "coarsen")
 #: gather -> the parameters that belong to it alone, with their defaults
-GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0}}
+#: The hierarchical gather's default solid-angle bound (sr): ``docs/dipole_rivals.md``, the hierarchical gather.
+DEFAULT_EPSILON = 0.1
+GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0},
+                 "hierarchical": {"spacing": 1.0, "epsilon": DEFAULT_EPSILON}}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
 
 
@@ -53,10 +59,13 @@ def _p(default, doc):
 class DipoleParams:
     """Settings of the ``dipole`` and ``dirpole`` methods (see the module docstring)."""
 
-    gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling) "
-                              "or vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors)")
-    spacing: float | None = _p(None, "gather=dense: sample spacing in reduced mean free paths 1/sigma_t' "
-                                     "(default 1), in [0.05, 10]")
+    gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling), "
+                              "vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors) "
+                              "or hierarchical (Jensen & Buhler 2002: an octree of the dense samples)")
+    spacing: float | None = _p(None, "gather=dense or hierarchical: sample spacing in reduced mean free paths "
+                                     "1/sigma_t' (default 1), in [0.05, 10]")
+    epsilon: float | None = _p(None, f"gather=hierarchical: a node subtending a solid angle below epsilon (sr) is "
+                                     f"used whole (default {DEFAULT_EPSILON:g}; 0 is the dense far field), in [0, 4 pi]")
     range: float | None = _p(None, "gather=vertex: effective scattering range in diffusion lengths 1/sigma_tr "
                                    "(default 4), in (0, 100]")
     density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
@@ -74,14 +83,15 @@ class DipoleParams:
         mine = GATHER_FIELDS[self.gather]
         for g, names in GATHER_FIELDS.items():
             for name in names:
-                v = getattr(self, name)
-                if g != self.gather and v is not None:
-                    bad(name, f"belongs to gather={g}, not gather={self.gather}",
-                        f"drop --{name} or use --gather {g}")
+                if name not in mine and getattr(self, name) is not None:
+                    owner = "|".join(o for o, n in GATHER_FIELDS.items() if name in n)
+                    bad(name, f"belongs to gather={owner}, not gather={self.gather}",
+                        f"drop --{name} or use --gather {owner.split('|')[0]}")
         for name, default in mine.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, default)
-        limits = {"spacing": (0.05, 10.0, True), "range": (0.0, 100.0, False), "density": (0.01, 100.0, True)}
+        limits = {"spacing": (0.05, 10.0, True), "range": (0.0, 100.0, False), "density": (0.01, 100.0, True),
+                  "epsilon": (0.0, 4.0 * math.pi, True)}
         for name in mine:
             v = getattr(self, name)
             lo, hi, lo_closed = limits[name]

@@ -18,18 +18,23 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
      - :func:`sslpv_gl.rsm.render_shadow_atlas` (``rsm.vert/frag``)
      - one shadow map per light, ``shadow_size``^2, the frustum of SSLPV's RSM
    * - ``gbuffer``
-     - dense
+     - dense, hierarchical
      - :mod:`dipole_gl.gbuffer` (``shade.vert``, ``gbuffer.frag``)
      - exit points (position, normal) per pixel, direct reflection (dielectric)
    * - ``irradiance``
      - both
      - :mod:`dipole_gl.irradiance` (``irradiance.comp``)
      - transmitted flux ``T I cos / d^2 V dA`` per surface point and light
+   * - ``aggregate``
+     - hierarchical
+     - :mod:`dipole_gl.octree` (host)
+     - the octree's internal nodes summed from the irradiance (:mod:`dipole_gl.hierarchical`)
    * - ``gather``
-     - both
-     - :mod:`dipole_gl.gather` (``gather_dense.comp`` / ``gather_vertex.comp``)
+     - all
+     - :mod:`dipole_gl.gather` (``gather_dense.comp`` / ``gather_vertex.comp``),
+       :mod:`dipole_gl.tree_gather` (``gather_tree.comp``)
      - dense: per pixel over every surface sample; vertex: per scattering vertex over its
-       precomputed neighbourhood
+       precomputed neighbourhood; hierarchical: per pixel down the octree
    * - ``shading``
      - vertex
      - :mod:`dipole_gl.gather` (``display.comp``), :mod:`dipole_gl.shade` (``shade_vertex.*``)
@@ -67,7 +72,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, gbuffer, irradiance, shade, sizing
+from . import check, gbuffer, hierarchical, irradiance, shade, sizing, tree_gather
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -82,10 +87,12 @@ N_RAD = len(radial_nodes()[0])
 
 #: Frame stages per gather, in order.
 STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather"),
-          "vertex": ("shadow", "irradiance", "gather", "shading")}
+          "vertex": ("shadow", "irradiance", "gather", "shading"),
+          "hierarchical": ("shadow", "gbuffer", "irradiance", "aggregate", "gather")}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
+              "aggregate": "octree nodes aggregated", "octree": "octree nodes",
               "shading": "pixels + display vertices", "material": "voxels", "sampling": "surface samples",
               "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices"}
 
@@ -139,6 +146,7 @@ class DipoleRenderer:
                      "gbuffer": lambda w: gbuffer.build_program(self.ctx, w),
                      "irradiance": lambda w: irradiance.build_program(self.ctx, w),
                      "dense": lambda w: gathers.build_dense(self.ctx, key[1], w),
+                     "tree": lambda w: tree_gather.build_program(self.ctx, key[1], w),
                      "vertex": lambda w: gathers.build_vertex(self.ctx, key[1], w),
                      "display": lambda w: gathers.build_display(self.ctx, w),
                      "shade": lambda w: shade.build_program(self.ctx, w)}[key[0]]
@@ -273,6 +281,9 @@ class DipoleRenderer:
                 dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
                            samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
+        elif params.gather == "hierarchical":
+            sub, full, mask = hierarchical.render(self, scene, kernel, params, mat, medium, views, shadow_tex, centre,
+                                                  radius, timer, work, info, pre_ms, pre_work, dbg)
         else:
             pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():

@@ -1,8 +1,8 @@
 """The dipole rivals as methods: ``dipole`` (Jensen et al. 2001) and ``dirpole`` (Frisvad et al. 2014).
 
 Both render with :class:`dipole_gl.renderer.DipoleRenderer`; their parameters are
-:class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex``, ``--spacing`` for dense,
-``--range`` and ``--density`` for vertex, ``--shadow-size``, ``--fit refuse|coarsen``: a setting over
+:class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex|hierarchical``, ``--spacing`` for dense and
+hierarchical, ``--range`` and ``--density`` for vertex, ``--epsilon`` for hierarchical, ``--shadow-size``, ``--fit refuse|coarsen``: a setting over
 the gather's budget refused or coarsened just enough, :mod:`dipole_gl.sizing`). A scene with a non-scattering
 voxel inside the mesh (albedo 0) is refused with one line (:mod:`dipole_gl.medium`).
 """
@@ -17,7 +17,7 @@ __all__ = ["DipoleMethod", "CLI_TO_FIELD"]
 
 #: command-line name -> DipoleParams field (shared by both kernels)
 CLI_TO_FIELD = {"gather": "gather", "spacing": "spacing", "range": "range", "density": "density",
-                "shadow_size": "shadow_size", "fit": "fit"}
+                "shadow_size": "shadow_size", "fit": "fit", "epsilon": "epsilon"}
 
 _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Hao & Varshney 2004) in GLSL",
            "dirpole": "directional dipole (Frisvad, Hachisuka & Kjeldsen 2014) in GLSL"}
@@ -25,7 +25,7 @@ _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Ha
 
 class DipoleMethod(Method):
     cli = CLI_TO_FIELD
-    stages = ("shadow", "gbuffer", "irradiance", "gather", "shading")   # the union of both gathers'
+    stages = ("shadow", "gbuffer", "irradiance", "aggregate", "gather", "shading")   # the union of the gathers'
 
     def __init__(self, kernel, shared):
         from dipole_gl.params import DipoleParams
@@ -35,7 +35,7 @@ class DipoleMethod(Method):
         self.title = _TITLES[kernel]
         self.params_type = DipoleParams
         self.work_units = WORK_UNITS
-        self.precompute_steps = ("material", "sampling", "remesh", "neighbourhoods", "display")
+        self.precompute_steps = ("material", "sampling", "octree", "remesh", "neighbourhoods", "display")
         self._shared = shared                          # one renderer (one GL context) for both kernels
 
     def label(self, params):
