@@ -45,7 +45,7 @@ GATHERS = ("dense", "vertex", "hierarchical")
 FITS = ("refuse", "coarsen")
 #: gather -> the parameters that belong to it alone, with their defaults
 #: The hierarchical gather's default solid-angle bound (sr): ``docs/dipole_rivals.md``, the hierarchical gather.
-DEFAULT_EPSILON = 0.1
+DEFAULT_EPSILON = 0.03
 GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0},
                  "hierarchical": {"spacing": 1.0, "epsilon": DEFAULT_EPSILON}}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}

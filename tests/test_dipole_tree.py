@@ -19,7 +19,7 @@ from harness.regression.accuracy import small_scene
 from harness.scene import load_scene
 from dipole_gl import budget, check, octree, twin, twin_tree
 from dipole_gl.medium import scene_material
-from dipole_gl.params import DipoleParams
+from dipole_gl.params import DEFAULT_EPSILON, DipoleParams
 from dipole_gl.sampling import NEAR_RADIUS, surface_samples
 from tests.test_dipole_gl import close
 
@@ -282,8 +282,8 @@ def test_bad_epsilon_is_one_line(value):
 
 
 def test_epsilon_belongs_to_the_hierarchical_gather():
-    assert DipoleParams(gather="hierarchical").as_dict() == {"gather": "hierarchical", "spacing": 1.0, "epsilon": 0.1,
-                                                             "shadow_size": 1024}
+    assert DipoleParams(gather="hierarchical").as_dict() == {"gather": "hierarchical", "spacing": 1.0,
+                                                             "epsilon": DEFAULT_EPSILON, "shadow_size": 1024}
     with pytest.raises(InputError, match=r"^--epsilon: epsilon: belongs to gather=hierarchical, not gather=dense"):
         DipoleParams(epsilon=0.1)
     assert DipoleParams(gather="hierarchical", spacing=2.0).spacing == 2.0
