@@ -92,8 +92,10 @@ def suite(renderer, page, scenes, epsilon):
     page.para(f"Every suite scene at its committed small size, both kernels, `--gather hierarchical --epsilon "
               f"{epsilon:g} --fit coarsen` (spacing 1 l' where the samples fit). Visits per covered pixel (mean / "
               "largest); frame and precomputation (sampling + octree) in seconds; the spot check's largest "
-              "difference against the twin and its seconds; wall: the whole first render (precomputation, frame, "
-              "check).")
+              "difference against the twin and its seconds; wall: the whole first render of the configuration "
+              "(precomputation, frame, check). The renderer keeps a scene's material, samples and octree for its "
+              "next render, so the directional dipole's wall time, rendered second, leaves them out (its "
+              "precomp. column is what they cost when made).")
     rows, total = [], 0.0
     for name in scenes:
         scene = small_scene(name)
