@@ -190,7 +190,7 @@ class TestBadInputOneLine:
         m = tmp_path / "m.toml"
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4]\n'
                      '[[also]]\nmethod = "dipole"\ngather = ["vertex"]\ngrid = [8]\n')
-        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: density, fit, gather, "
+        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: density, epsilon, fit, gather, "
                                              r"method, range, shadow_size, spacing"):
             load_matrix(m)
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
