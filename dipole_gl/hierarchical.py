@@ -7,7 +7,8 @@ octree (``octree``, :func:`dipole_gl.octree.build`). Frame stages: ``shadow`` (t
 (:mod:`dipole_gl.tree_gather`). Every render recomputes :data:`dipole_gl.check.CHECK_POINTS`
 pixels with the twin (:func:`dipole_gl.check.check_tree`).
 
-``fit = coarsen`` keeps the spacing where the samples fit :data:`dipole_gl.sampling.MAX_SAMPLES`
+An octree whose largest storage buffer exceeds the GL's limit (``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``) is
+refused with one line before any frame work. ``fit = coarsen`` keeps the spacing where the samples fit :data:`dipole_gl.sampling.MAX_SAMPLES`
 and coarsens it just enough otherwise (:func:`dipole_gl.sizing.dense_spacing` with no pixel-pair
 budget: the descent's cost does not grow as pixels x samples).
 """
@@ -18,6 +19,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from harness.errors import InputError
 
 from . import check, gbuffer, irradiance, octree, sizing, tree_gather
 from .sampling import N_PHI, radial_nodes, surface_samples
@@ -51,6 +54,11 @@ def tree_data(renderer, scene, mat, spacing):
         tree = octree.build(pos, nrm, area)
         t2 = time.perf_counter()
         L = len(scene.lights)
+        need, limit = tree_gather.largest_buffer(tree, L), tree_gather.storage_limit(renderer.ctx)
+        if need > limit:
+            raise InputError("--spacing", "spacing", f"the hierarchical gather's octree of {len(pos):,} samples "
+                             f"needs a storage buffer of {need:,} bytes, over this GL's {limit:,}",
+                             "raise --spacing (the buffers shrink as its square)")
         c[key] = TreeData(tree, irradiance.PointBuffers(renderer.ctx, tree.positions, tree.normals, tree.areas, L),
                           tree_gather.TreeBuffers(renderer.ctx, tree, L), (t1 - t0) * 1e3, (t2 - t1) * 1e3)
     return c[key]

@@ -42,7 +42,7 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
 
 Precomputation (host, timed apart from the frame, once per scene and setting): the
 medium's coefficients (``material``), the dense samples (``sampling``,
-:mod:`dipole_gl.sampling`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
+:mod:`dipole_gl.sampling`), for the hierarchical gather their ``octree`` (:mod:`dipole_gl.octree`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
 ``display`` (:mod:`dipole_gl.vertex`). Each result also carries a device-independent *work
 count* per stage (:data:`WORK_UNITS`).
 

@@ -27,10 +27,10 @@ from sslpv_gl import shaders as _sh
 from . import budget
 from . import gather as gathers
 from .glsl import DIRS, MAX_LIGHTS
-from .octree import aggregate, to_lights
 from .sampling import NEAR_RADIUS
 
-__all__ = ["build_program", "TreeBuffers", "upload_aggregates", "frame_aggregates", "run_tree", "tree_chunk_size"]
+__all__ = ["build_program", "TreeBuffers", "upload_aggregates", "largest_buffer", "storage_limit", "run_tree",
+           "tree_chunk_size"]
 
 
 def build_program(ctx, kernel, warnings):
@@ -90,9 +90,15 @@ def upload_aggregates(tbufs, agg):
     tbufs.lights.write(lights.tobytes())
 
 
-def frame_aggregates(tree, points, lights):
-    """The aggregates of this frame: the GL flux of the octree's samples, read back, summed per node."""
-    return aggregate(tree, points.read_flux(), to_lights(tree, lights))
+def largest_buffer(tree, n_lights):
+    """Bytes of the largest storage buffer the hierarchical gather binds (nodes, aggregates, per-light flux)."""
+    L, K = max(n_lights, 1), max(tree.internal_count, 1)
+    return max(tree.nodes * 16, K * 3 * 16, L * K * 2 * 16, L * len(tree.positions) * 16)
+
+
+def storage_limit(ctx):
+    """The GL's largest shader storage block (bytes); 2^27, the value OpenGL 4.3 guarantees, if unknown."""
+    return int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
 
 
 def run_tree(prog, dense_prog, kernel, points, tbufs, medium, gbuf, out_sub, out_full, scene, spacing, epsilon):

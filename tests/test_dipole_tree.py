@@ -273,6 +273,18 @@ def test_render_checks_itself(dipole_renderer, monkeypatch):
         dipole_renderer.render(scene, "dirpole", params)
 
 
+@pytest.mark.gl
+def test_an_octree_over_the_storage_limit_is_refused(dipole_renderer, monkeypatch):
+    from dipole_gl import tree_gather
+
+    monkeypatch.setattr(tree_gather, "storage_limit", lambda ctx: 500_000)
+    scene = load_scene("two_lights").with_resolution(8, 8)
+    with pytest.raises(InputError, match=r"^--spacing: spacing: the hierarchical gather's octree of 24,576 samples needs "
+                                         r"a storage buffer of 827,200 bytes, over this GL's 500,000; raise"):
+        dipole_renderer.render(scene, "dipole", DipoleParams(gather="hierarchical", spacing=0.5))
+    assert dipole_renderer.render(scene, "dipole", DipoleParams(gather="hierarchical")).info["samples"] == 6144
+
+
 # ---------------------------------------------------------------------------- parameters
 
 @pytest.mark.parametrize("value", [-0.1, float("nan"), float("inf"), 13.0, True, "0.1"])
