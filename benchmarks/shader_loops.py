@@ -7,7 +7,10 @@ largest number of loop iterations one invocation runs on the suite: as one dispa
 loop in one invocation) and as chunked now (the largest dispatch). The rivals' settings are the
 nightly's (``harness/regression/nightly_matrix.toml``: dense at the default spacing, vertex at
 density 0.5 and range 2) under the sizing rule ``fit = coarsen`` (``dipole_gl.sizing``); the
-vertex gather's longest row comes from the real precomputation (remeshing, neighbourhoods).
+vertex gather's longest row comes from the real precomputation (remeshing, neighbourhoods). The
+hierarchical gather's descent is bounded by its octree's node count (``dipole_gl.octree``, at the
+default spacing under the same rule without a pixel-pair budget): at ``epsilon = 0`` a pixel visits
+every lit node.
 
     .venv/bin/python benchmarks/shader_loops.py            # prints the markdown table
     .venv/bin/python benchmarks/shader_loops.py --write    # and writes docs/benchmarks/shader_loops.md
@@ -23,10 +26,10 @@ import numpy as np
 from harness.errors import InputError
 from harness.regression.accuracy import small_scene
 from harness.scene import list_scenes
-from dipole_gl import budget, single, sizing
+from dipole_gl import budget, octree, single, sizing
 from dipole_gl.medium import scene_material
 from dipole_gl.params import DipoleParams
-from dipole_gl.sampling import N_PHI, radial_nodes, sample_count
+from dipole_gl.sampling import N_PHI, radial_nodes, sample_count, surface_samples
 from dipole_gl.vertex import precompute
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,6 +46,8 @@ def scene_figures(name, vertex=True):
     spacing = sizing.dense_spacing(scene.mesh, mat.mfp, DipoleParams().spacing, pixels)
     out = {"scene": name, "L": len(scene.lights), "samples": sample_count(scene.mesh, spacing * mat.mfp),
            "spacing": spacing, "row": None}
+    tree_spacing = sizing.dense_spacing(scene.mesh, mat.mfp, DipoleParams().spacing, 1)
+    out["nodes"] = octree.build(*surface_samples(scene.mesh, tree_spacing * mat.mfp)).nodes
     if vertex:
         density = sizing.vertex_density(scene.mesh, mat.mfp, mat.diffusion_length, NIGHTLY_VERTEX["density"],
                                         NIGHTLY_VERTEX["range"])
@@ -97,6 +102,12 @@ def _cubemap(kernel, chunked):
 
         n = CUBE_K if not chunked else min(CUBE_K, gather_chunk(kernel, fig["L"]))
         return fig["L"] * (1 + n * per)
+
+
+def _tree(kernel, chunked):
+    def f(fig):
+        n = fig["nodes"] if not chunked else min(fig["nodes"], budget.tree_chunk(kernel, fig["L"]))
+        return n * budget.far_iterations_per_sample(kernel, fig["L"])
     return f
 
 
@@ -137,6 +148,16 @@ def loops(figs):
          "yes (k up to 65,536)"),
         ("dipole_gl/shaders/cubemap_combine.comp", "for (int f = 0; f < 6; ++f)",
          "cubemap combination: the six faces", "6", (6, "all"), None, "no"),
+        ("dipole_gl/shaders/gather_tree.comp", "while (i < u_nodes && steps < u_steps)",
+         "hierarchical descent: octree nodes (dipole)", "octree nodes", _largest(figs, _tree("dipole", False)),
+         _largest(figs, _tree("dipole", True)), "yes (a cursor per pixel; dispatched until every pixel is done)"),
+        ("dipole_gl/shaders/gather_tree.comp", "for (int l = 0; l < u_n_lights; ++l) {\n                    vec4 f",
+         "hierarchical descent: nodes x lights x kernel (dirpole)", f"nodes (1 + L (1 + {C}))",
+         _largest(figs, _tree("dirpole", False)), _largest(figs, _tree("dirpole", True)),
+         "yes (a cursor per pixel; dispatched until every pixel is done)"),
+        ("dipole_gl/shaders/gather_tree.comp", "for (int l = 0; l < u_n_lights; ++l) {\n            vec4 f = agg",
+         "hierarchical descent: an accepted node's lights (dirpole)", "L <= 8", _largest(figs, L), None,
+         "no: inside the node's cost above"),
         ("dipole_gl/shaders/kernels.glsl", "for (int k = 0; k < 3; ++k)",
          "dirpole_sd: the three colours", "3", (3, "all"), None, f"no: counted as {C} per call"),
         ("dipole_gl/shaders/single.comp", "for (int k = 0; k < u_n_march; ++k)",
@@ -211,12 +232,13 @@ def table(figs):
     out += ["", "Shaders without a loop: " + ", ".join(f"`{n}`" for n in no_loop) +
             " (SSLPV's RSM texels are injected one vertex invocation each, the propagation is one invocation "
             "per cell).", "", "Per scene (lights, dense samples at the rule's spacing, the vertex gather's "
-            "longest row at the rule's density):", "", "| scene | L | spacing (l') | samples | density | vertices | longest row |",
-            "|---|---|---|---|---|---|---|"]
+            "longest row at the rule's density, the hierarchical gather's octree nodes):", "",
+            "| scene | L | spacing (l') | samples | density | vertices | longest row | octree nodes |",
+            "|---|---|---|---|---|---|---|---|"]
     for f in figs:
         out.append(f"| {f['scene']} | {f['L']} | {f['spacing']:g} | {f['samples']:,} | {f.get('density', '-')} | "
-                   f"{f.get('vertices', '-'):,} | {f['row']:,} |" if f["row"] is not None else
-                   f"| {f['scene']} | {f['L']} | {f['spacing']:g} | {f['samples']:,} | - | - | - |")
+                   f"{f.get('vertices', '-'):,} | {f['row']:,} | {f['nodes']:,} |" if f["row"] is not None else
+                   f"| {f['scene']} | {f['L']} | {f['spacing']:g} | {f['samples']:,} | - | - | - | {f['nodes']:,} |")
     return "\n".join(out)
 
 

@@ -20,7 +20,9 @@ compiler may unroll it; llvmpipe was measured to count it once per call):
   its light loop and the kernel's calls: ``1`` or ``1 + L (1 + c)`` per sample;
 * dense gather, near field (last dispatch only): the standard dipole ``L + N_RAD``, the
   directional dipole ``L (1 + N_RAD (1 + N_PHI (1 + c)))`` (lights x radial nodes x angles);
-* vertex gather: one iteration per neighbour, ``1`` or ``1 + L (1 + c)``.
+* vertex gather: one iteration per neighbour, ``1`` or ``1 + L (1 + c)``;
+* hierarchical gather (``gather_tree.comp``): one iteration per node visited, and for the
+  directional dipole its light loop and the kernel's calls, ``1`` or ``1 + L (1 + c)`` per node.
 
 Loops of a fixed trip count elsewhere (the G-buffer's eight lights, the shadow filter's 3 x 3)
 run outside the gathers' invocations. The audit of every loop is in ``docs/dipole_rivals.md``
@@ -30,7 +32,7 @@ run outside the gathers' invocations. The audit of every loop is in ``docs/dipol
 from __future__ import annotations
 
 __all__ = ["LLVMPIPE_LOOP_LIMIT", "ITERATION_BUDGET", "DIRPOLE_CALL_ITERATIONS", "near_iterations", "far_iterations_per_sample",
-           "dense_chunk", "vertex_chunk", "chunks"]
+           "dense_chunk", "vertex_chunk", "tree_chunk", "chunks"]
 
 #: llvmpipe's total loop iterations per shader invocation (``LP_MAX_TGSI_LOOP_ITERATIONS``).
 LLVMPIPE_LOOP_LIMIT = 65_535
@@ -64,6 +66,11 @@ def dense_chunk(kernel, n_lights, n_rad, n_phi, budget=ITERATION_BUDGET):
 
 def vertex_chunk(kernel, n_lights, budget=ITERATION_BUDGET):
     """Neighbours per dispatch of the vertex gather."""
+    return int(budget // far_iterations_per_sample(kernel, n_lights))
+
+
+def tree_chunk(kernel, n_lights, budget=ITERATION_BUDGET):
+    """Octree nodes per invocation and dispatch of the hierarchical gather's descent."""
     return int(budget // far_iterations_per_sample(kernel, n_lights))
 
 

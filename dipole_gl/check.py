@@ -7,6 +7,9 @@ After each frame the renderer recomputes :data:`CHECK_POINTS` points of its own 
   takes the G-buffer's exit point, normal and light visibility there, the surface samples and
   the irradiance pass's visibility, and evaluates the whole gather (far field over every
   sample, near field, exit Fresnel), :func:`dipole_gl.twin.dense_gather`;
+* hierarchical gather: covered pixels drawn as for the dense gather; the twin recomputes the
+  irradiance of the octree's samples, their aggregates (:func:`dipole_gl.octree.aggregate`) and the
+  descent at the same ``epsilon`` (:func:`dipole_gl.twin_tree.tree_gather`);
 * vertex gather: scattering vertices that the display mesh reads (so they reach covered
   pixels), drawn the same way; the twin evaluates their neighbourhood sums ``B``,
   :func:`dipole_gl.twin.vertex_gather` (the raster pass that interpolates ``B`` is not checked);
@@ -35,9 +38,10 @@ import numpy as np
 
 from harness.errors import ResultRefused
 
-from . import single_twin, twin
+from . import octree, single_twin, twin, twin_tree
 
-__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "check_single", "compare"]
+__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "check_single", "check_tree",
+           "compare"]
 
 #: Points recomputed by the twin per render.
 CHECK_POINTS = 8
@@ -110,3 +114,22 @@ def check_single(scene, mat, views, size, atlas, gbuf, s1):
     rel = compare(s1[r, c], ref, f"{scene.name}: single scattering")
     return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
             "twin_evaluations": int(len(pick) * single_twin.N_MARCH * len(scene.lights))}
+
+
+def check_tree(kernel, scene, mat, tree, flux_gl, gbuf, sub, spacing, epsilon):
+    """Recompute :data:`CHECK_POINTS` covered pixels of the hierarchical gather (``tree``: the
+    :class:`dipole_gl.octree.Octree`; ``gbuf`` as :func:`check_dense`) -> the record for ``info["check"]``."""
+    t = time.perf_counter()
+    eta = float(scene.boundary.eta)
+    flux, dirs = twin.irradiance(tree.positions, tree.normals, tree.areas, scene.lights, eta, flux_gl[..., 3])
+    agg = octree.aggregate(tree, flux, dirs)
+    rows, cols = np.nonzero(gbuf["mask"])
+    pick = _draw(len(rows))
+    r, c = rows[pick], cols[pick]
+    ref, visits = twin_tree.tree_gather(kernel, tree, agg, gbuf["position"][r, c], gbuf["normal"][r, c],
+                                        scene.camera.origin, flux, dirs, mat, eta, spacing, scene.lights,
+                                        gbuf["visibility"][r, c], epsilon)
+    rel = compare(sub[r, c], ref, f"{scene.name}: {kernel} hierarchical gather")
+    L = len(scene.lights)
+    return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
+            "twin_evaluations": int(visits.sum() * (L if kernel == "dirpole" else 1) + len(tree.positions) * L)}

@@ -105,13 +105,14 @@ def dense_chunk_size(kernel, n_lights):
     return budget.dense_chunk(kernel, n_lights, len(radial_nodes()[0]), N_PHI)
 
 
-def run_dense(prog, kernel, points, medium, gbuf, out_sub, out_full, scene, spacing):
+def run_dense(prog, kernel, points, medium, gbuf, out_sub, out_full, scene, spacing, far=None):
     """The dense gather over ``points`` (sample spacing ``spacing``, scene units) for every G-buffer
     pixel -> writes ``out_sub`` and ``out_full``; returns the number of dispatches.
 
     The far field runs in chunks of :func:`dense_chunk_size` samples, one dispatch each, the
     partial sums accumulating per pixel in a storage buffer; the last dispatch adds the near
-    field and writes the images.
+    field and writes the images. ``far``: a buffer holding the far field per pixel already
+    (the hierarchical gather's, :mod:`dipole_gl.tree_gather`): only the last dispatch runs, over no sample.
     """
     cam = scene.camera
     points.bind()
@@ -134,16 +135,17 @@ def run_dense(prog, kernel, points, medium, gbuf, out_sub, out_full, scene, spac
     _sh.set_uniform(prog, "u_eta", float(scene.boundary.eta))
     _sh.set_uniform(prog, "u_cam_pos", tuple(map(float, cam.origin)))
     _sh.set_uniform(prog, "u_size", (cam.width, cam.height))
-    accum = prog.ctx.buffer(reserve=cam.width * cam.height * 16)
+    accum = prog.ctx.buffer(reserve=cam.width * cam.height * 16) if far is None else far
     accum.bind_to_storage_buffer(5)
-    pieces = budget.chunks(points.count, dense_chunk_size(kernel, len(scene.lights)))
+    pieces = budget.chunks(points.count, dense_chunk_size(kernel, len(scene.lights))) if far is None else [(1, 1)]
     for k, (first, end) in enumerate(pieces):
         _sh.set_uniform(prog, "u_first", first)
         _sh.set_uniform(prog, "u_end", end)
         _sh.set_uniform(prog, "u_last", int(k == len(pieces) - 1))
         prog.run((cam.width + 7) // 8, (cam.height + 7) // 8)
         prog.ctx.memory_barrier()
-    accum.release()
+    if far is None:
+        accum.release()
     return len(pieces)
 
 

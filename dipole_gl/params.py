@@ -10,9 +10,12 @@ never carries a setting that does nothing. Bad values raise
 field              gather     meaning
 =================  =========  ==========================================================
 ``gather``         all        ``dense`` (whole surface), ``vertex`` (Hao & Varshney) or
-                              ``cubemap`` (the thesis draft's real-time directional dipole)
-``spacing``        dense      surface sample spacing, in reduced mean free paths
-                              ``l' = 1/sigma_t'`` (default 1)
+                              ``cubemap`` (the thesis draft's real-time directional dipole) or
+                              ``hierarchical`` (Jensen & Buhler's octree)
+``spacing``        dense,     surface sample spacing, in reduced mean free paths
+                   hierarch.  ``l' = 1/sigma_t'`` (default 1)
+``epsilon``        hierarch.  the octree's solid-angle bound: a node subtending less than
+                              ``epsilon`` sr is used whole (default :data:`DEFAULT_EPSILON`)
 ``range``          vertex     neighbourhood radius, in diffusion lengths ``1/sigma_tr``
                               (default 4)
 ``density``        vertex     scattering vertices per ``l'^2`` (default 1)
@@ -50,24 +53,29 @@ from harness.errors import InputError
 
 from .cubemap_geometry import EPS_B, EPS_C, EPS_G
 
-__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS", "DEFAULTS", "LIMITS"]
+__all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS", "DEFAULTS", "LIMITS",
+           "DEFAULT_EPSILON"]
 
 KERNELS = ("dipole", "dirpole")
-GATHERS = ("dense", "vertex", "cubemap")
+GATHERS = ("dense", "vertex", "cubemap", "hierarchical")
 #: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
 FITS = ("refuse", "coarsen")
 #: Which terms of the BSSRDF a render adds (``both`` is the default, as Jensen et al. 2001 render it).
 TERMS = ("diffusion", "single", "both")
 #: gather -> the parameters that belong to it alone, with their defaults
+#: The hierarchical gather's default solid-angle bound (sr): ``docs/dipole_rivals.md``, the hierarchical gather.
+DEFAULT_EPSILON = 0.03
 GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0},
                  "cubemap": {"cube_size": 64, "light_size": 256, "samples": 32, "frames": 8, "disc_radius": 4.0,
-                             "eps_g": EPS_G, "eps_c": EPS_C, "eps_b": EPS_B}}
+                             "eps_g": EPS_G, "eps_c": EPS_C, "eps_b": EPS_B},
+                 "hierarchical": {"spacing": 1.0, "epsilon": DEFAULT_EPSILON}}
 #: name -> (lowest, highest, lowest allowed, integer)
 LIMITS = {"spacing": (0.05, 10.0, True, False), "range": (0.0, 100.0, False, False),
           "density": (0.01, 100.0, True, False), "cube_size": (8, 2048, True, True),
           "light_size": (16, 4096, True, True), "samples": (1, 65536, True, True), "frames": (1, 4096, True, True),
           "disc_radius": (0.0, 100.0, False, False), "eps_g": (0.0, 16.0, True, False),
-          "eps_c": (0.0, 16.0, True, False), "eps_b": (0.0, 64.0, True, False)}
+          "eps_c": (0.0, 16.0, True, False), "eps_b": (0.0, 64.0, True, False),
+          "epsilon": (0.0, 4.0 * math.pi, True, False)}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
 
 
@@ -80,10 +88,13 @@ class DipoleParams:
     """Settings of the ``dipole`` and ``dirpole`` methods (see the module docstring)."""
 
     gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling), "
-                              "vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors) or "
-                              "cubemap (the thesis draft: light buffer, six cube faces, disc samples, frames)")
-    spacing: float | None = _p(None, "gather=dense: sample spacing in reduced mean free paths 1/sigma_t' "
-                                     "(default 1), in [0.05, 10]")
+                              "vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors), "
+                              "cubemap (the thesis draft: light buffer, six cube faces, disc samples, frames) or "
+                              "hierarchical (Jensen & Buhler 2002: an octree of the dense samples)")
+    spacing: float | None = _p(None, "gather=dense or hierarchical: sample spacing in reduced mean free paths "
+                                     "1/sigma_t' (default 1), in [0.05, 10]")
+    epsilon: float | None = _p(None, f"gather=hierarchical: a node subtending a solid angle below epsilon (sr) is "
+                                     f"used whole (default {DEFAULT_EPSILON:g}; 0 is the dense far field), in [0, 4 pi]")
     range: float | None = _p(None, "gather=vertex: effective scattering range in diffusion lengths 1/sigma_tr "
                                    "(default 4), in (0, 100]")
     density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
@@ -119,10 +130,10 @@ class DipoleParams:
         mine = GATHER_FIELDS[self.gather]
         for g, names in GATHER_FIELDS.items():
             for name in names:
-                v = getattr(self, name)
-                if g != self.gather and v is not None:
-                    bad(name, f"belongs to gather={g}, not gather={self.gather}",
-                        f"drop --{name} or use --gather {g}")
+                if name not in mine and getattr(self, name) is not None:
+                    owner = "|".join(o for o, n in GATHER_FIELDS.items() if name in n)
+                    bad(name, f"belongs to gather={owner}, not gather={self.gather}",
+                        f"drop --{name} or use --gather {owner.split('|')[0]}")
         for name, default in mine.items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, default)

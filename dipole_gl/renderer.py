@@ -18,18 +18,23 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
      - :func:`sslpv_gl.rsm.render_shadow_atlas` (``rsm.vert/frag``)
      - one shadow map per light, ``shadow_size``^2, the frustum of SSLPV's RSM
    * - ``gbuffer``
-     - dense
+     - dense, hierarchical
      - :mod:`dipole_gl.gbuffer` (``shade.vert``, ``gbuffer.frag``)
      - exit points (position, normal) per pixel, direct reflection (dielectric)
    * - ``irradiance``
      - both
      - :mod:`dipole_gl.irradiance` (``irradiance.comp``)
      - transmitted flux ``T I cos / d^2 V dA`` per surface point and light
+   * - ``aggregate``
+     - hierarchical
+     - :mod:`dipole_gl.octree` (host)
+     - the octree's internal nodes summed from the irradiance (:mod:`dipole_gl.hierarchical`)
    * - ``gather``
-     - both
-     - :mod:`dipole_gl.gather` (``gather_dense.comp`` / ``gather_vertex.comp``)
+     - all
+     - :mod:`dipole_gl.gather` (``gather_dense.comp`` / ``gather_vertex.comp``),
+       :mod:`dipole_gl.tree_gather` (``gather_tree.comp``)
      - dense: per pixel over every surface sample; vertex: per scattering vertex over its
-       precomputed neighbourhood
+       precomputed neighbourhood; hierarchical: per pixel down the octree
    * - ``shading``
      - vertex
      - :mod:`dipole_gl.gather` (``display.comp``), :mod:`dipole_gl.shade` (``shade_vertex.*``)
@@ -43,7 +48,7 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
 
 Precomputation (host, timed apart from the frame, once per scene and setting): the
 medium's coefficients (``material``), the dense samples (``sampling``,
-:mod:`dipole_gl.sampling`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
+:mod:`dipole_gl.sampling`), for the hierarchical gather their ``octree`` (:mod:`dipole_gl.octree`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
 ``display`` (:mod:`dipole_gl.vertex`). Each result also carries a device-independent *work
 count* per stage (:data:`WORK_UNITS`).
 
@@ -73,7 +78,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, cubemap, gbuffer, irradiance, shade, single, sizing
+from . import check, cubemap, gbuffer, hierarchical, irradiance, shade, single, sizing, tree_gather
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -89,10 +94,12 @@ N_RAD = len(radial_nodes()[0])
 #: Frame stages per gather, in order.
 STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather", "single"),
           "vertex": ("shadow", "irradiance", "gather", "shading", "gbuffer", "single"),
-          "cubemap": (*cubemap.STAGES, "single")}
+          "cubemap": (*cubemap.STAGES, "single"),
+          "hierarchical": ("shadow", "gbuffer", "irradiance", "aggregate", "gather", "single")}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
+              "aggregate": "octree nodes aggregated", "octree": "octree nodes",
               "shading": "pixels + display vertices", "single": "march nodes x lights (covered pixels)",
               "material": "voxels", "sampling": "surface samples",
               "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices",
@@ -149,6 +156,7 @@ class DipoleRenderer:
                      "gbuffer": lambda w: gbuffer.build_program(self.ctx, w),
                      "irradiance": lambda w: irradiance.build_program(self.ctx, w),
                      "dense": lambda w: gathers.build_dense(self.ctx, key[1], w),
+                     "tree": lambda w: tree_gather.build_program(self.ctx, key[1], w),
                      "vertex": lambda w: gathers.build_vertex(self.ctx, key[1], w),
                      "display": lambda w: gathers.build_display(self.ctx, w),
                      "shade": lambda w: shade.build_program(self.ctx, w),
@@ -310,6 +318,17 @@ class DipoleRenderer:
                 dbg.update(position=gview["position"], normal=gview["normal"],
                            reflection=gbuffer.read(gb.textures[2], W, H)[..., :3], flux=flux,
                            samples=entry.host, visibility=gview["visibility"], spacing=spacing * mat.mfp)
+        elif params.gather == "hierarchical":
+            sub, full, mask = hierarchical.render(self, scene, kernel, params, mat, medium, views, shadow_tex, centre,
+                                                  radius, timer, work, info, pre_ms, pre_work, dbg)
+            if params.terms == "both":           # S^(1) on the gather's G-buffer, added to its (checked) output
+                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+                out = self._targets.get("dipole_out", (W, H), 2)
+                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
+                             add=True)
+                sub, full = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
+                if debug:
+                    dbg["single_pass"] = self._last_single
         else:
             pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():

@@ -96,7 +96,8 @@ def test_both_adds_single_to_the_gathers(dipole_renderer):
     """``terms = both`` is the ``diffusion`` image plus S^(1), for every gather."""
     sc = _scene_two_lights()
     for kw in ({"gather": "dense", "spacing": 2.0}, {"gather": "vertex", "density": 0.5, "range": 2.0},
-               {"gather": "cubemap", "samples": 8, "frames": 1, "cube_size": 32, "light_size": 64}):
+               {"gather": "cubemap", "samples": 8, "frames": 1, "cube_size": 32, "light_size": 64},
+               {"gather": "hierarchical", "spacing": 2.0}):
         diff = dipole_renderer.render(sc, "dipole", DipoleParams(terms="diffusion", **kw)).subsurface
         both = dipole_renderer.render(sc, "dipole", DipoleParams(terms="both", **kw), debug=True)
         s1 = both.debug["single_pass"]["single"]

@@ -191,8 +191,8 @@ class TestBadInputOneLine:
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4]\n'
                      '[[also]]\nmethod = "dipole"\ngather = ["vertex"]\ngrid = [8]\n')
         with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: cube_size, density, "
-                                             r"disc_radius, eps_b, eps_c, eps_g, fit, frames, gather, light_size, method, "
-                                             r"range, samples, shadow_size, spacing"):
+                                             r"disc_radius, eps_b, eps_c, eps_g, epsilon, fit, frames, gather, light_size, "
+                                             r"method, range, samples, shadow_size, spacing"):
             load_matrix(m)
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
         with pytest.raises(InputError, match=r"also\[0\]\.method: unknown method 'atlas'"):
