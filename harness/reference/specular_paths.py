@@ -159,6 +159,8 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
         inside = np.zeros(photons, bool)
         labels = np.array([""] * photons, dtype=object)
         for event in range(max_events + 1):
+            if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
+                break
             valid, t, p, n = cast(o, d)
             # A ray "inside" that meets no surface slipped through at a grazing hit (the shading normal
             # refracts it to the geometric surface's other side): dropped, its weight reported as leaked.
@@ -171,7 +173,7 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
                     m = labels[inside] == lab
                     by_label[lab] = by_label.get(lab, np.zeros(3)) + (w[inside][m] * dep[m]).sum(0)
                 w[inside] = w[inside] * tr
-            if event == max_events or len(o) == 0:
+            if event == max_events:
                 truncated += w.sum(0)
                 break
             # ---- split at the boundary: reflected F, refracted 1 - F (shading normal, facing the ray)
