@@ -13,8 +13,10 @@
   light must equal what the loss accounting says the connections miss, ``traced direct /
   delivered`` (:func:`harness.reference.losses.first_scatter` with ``max_crossings = 1``):
   within 3 % (the finite radius, and the image weighing the medium otherwise than first
-  scattering does) + 3 combined SE per channel. Without the accounting the ratio is 1.16 / 1.11 /
-  1.06 (``benchmarks/mnee_chains.py``).
+  scattering does) + 3 combined SE per channel. The image's ratio alone is 1.18 / 1.15 / 1.11 +-
+  0.03 (``docs/benchmarks/mnee_chains.md``), the counted one 1.11 / 1.08 / 1.04: the accounting
+  explains most of the shortfall, and this test's noise (SE 0.04-0.05 per channel) resolves
+  little more than that.
 """
 
 import dataclasses

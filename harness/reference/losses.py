@@ -40,8 +40,10 @@ path's (exact at eta -> 1; at larger eta the refracted chain may carry more or l
 chain with no solution carries none, so the estimate errs on the side of calling a
 reference inexact). ``missed_share`` weighs the medium by where light first scatters, not by
 what the camera sees, and is a share of that light, not of the image (on the torus lit through
-its hole the two agree within their noise: ``benchmarks/mnee_chains.py --decompose``); it
-covers point lights only.
+its hole the image's shortfall in the area-light limit is 0.03-0.08 larger than this one
+predicts, about 2 SE per channel: ``docs/benchmarks/mnee_chains.md``); it covers point lights
+only, and its standard error (``DELIVERED_POINTS``, about 1 % on the suite's tori) is of the
+order of the limit it is judged against, so a loss near that limit may be called either way.
 """
 
 import json
