@@ -43,7 +43,10 @@ what the camera sees, and is a share of that light, not of the image (on the tor
 its hole the image's shortfall in the area-light limit is 0.03-0.08 larger than this one
 predicts, about 2 SE per channel: ``docs/benchmarks/mnee_chains.md``); it covers point lights
 only, and its standard error (``DELIVERED_POINTS``, about 1 % on the suite's tori) is of the
-order of the limit it is judged against, so a loss near that limit may be called either way.
+order of the limit it is judged against, so a loss near that limit may be called either way;
+the delivered power's spread over seeds is 1 to 1.7 times the standard error it states (the
+fluence near the lit surface is heavy-tailed; six seeds on ``jade_backlit_dielectric``,
+``skin_torus_dielectric`` and ``torus_hole``).
 """
 
 import json
