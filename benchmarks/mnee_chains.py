@@ -18,8 +18,18 @@ over the pixels where its absorber pass (albedo 0) shows no reflection of the bu
 boundary (a point light has none), against ``mneevolpath`` with the point light (chains on and off), at
 ``--max-depth``; prints the image mean ratios and their standard errors.
 
+``--decompose``: instead, per scene (``--scenes``; ``torus_hole`` at eta 1.4), the power that first
+scatters in the medium traced from the point light through every specular path
+(:mod:`harness.reference.specular_paths`: one refraction, chains through 3, 5 ... crossings,
+paths with a reflection) against what ``mneevolpath``'s connections deliver
+(:mod:`harness.reference.connection_power`), the share of connections by crossing count of the
+seed segment (``stats``, at ``--size``), and, on ``torus_hole``, the area-light limit at each
+``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
+``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`).
+
 Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
-``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``.
+``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``
+``[--decompose --depths 4 5 6 --write]``.
 """
 
 import argparse
@@ -31,6 +41,8 @@ import numpy as np
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
 from harness.scene import Boundary, load_scene
+
+SMOOTH_SCENES = ("torus_hole", "skin_torus_dielectric", "jade_backlit_dielectric")
 
 
 def scene_named(name):
@@ -66,8 +78,16 @@ def main():
     ap.add_argument("--area-limit", type=float, default=None, metavar="R")
     ap.add_argument("--max-depth", type=int, default=-1)
     ap.add_argument("--area-spp", type=int, default=16384)
+    ap.add_argument("--decompose", action="store_true", help="the first-scatter decomposition and its page")
+    ap.add_argument("--scenes", nargs="+", default=list(SMOOTH_SCENES))
+    ap.add_argument("--depths", type=int, nargs="+", default=[4, 5, 6])
+    ap.add_argument("--photons", type=int, default=1 << 16)
+    ap.add_argument("--points", type=int, default=1 << 19)
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/mnee_chains.md (with --decompose)")
     args = ap.parse_args()
     mi = ms.use_variant("llvm_ad_rgb")
+    if args.decompose:
+        return decompose(mi, args)
     if args.area_limit is not None:
         return area_limit(mi, args)
     from harness.reference import mnee
@@ -108,6 +128,105 @@ def main():
               f"{st['mnee_chain_connected'] / started:.4f}, lost {st['mnee_lost'] / started:.4f} (over the maximum "
               f"{over:.4f}); lost light "
               f"(straight, index-matched) / image {fmt(lost)}")
+
+
+def area_ratio(mi, scene, r, md, seeds, area_spp, spp):
+    """Sphere light (volpath) over point light (the scene's integrator) at ``max_depth = md``: ratio, SE, pixels out."""
+    light = scene.lights[0]
+    bulb = {"type": "sphere", "center": [float(c) for c in light.position], "radius": r,
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (np.asarray(light.intensity, float)
+                                                                             / (np.pi * r * r)).tolist()}}}
+    area = {"lights": False, "extra_emitters": {"bulb": bulb}, "sample_emitters": False,
+            "integrator": {"type": "volpath", "max_depth": md}}
+    full, _ = render(mi, ms.build_scene_dict(scene, **area), range(100, 100 + seeds), area_spp)
+    absorber, _ = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), area_spp // 4)
+    keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
+    point, _ = render(mi, ms.build_scene_dict(scene, max_depth=md), range(seeds), spp)
+    f, p = full[:, keep].mean(1), point[:, keep].mean(1)
+    ratio = f.mean(0) / p.mean(0)
+    se = ratio * np.sqrt(f.var(0, ddof=1) / len(f) / f.mean(0) ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
+    return ratio, se, int((~keep).sum())
+
+
+def rgb(a, digits=3):
+    return " / ".join(f"{v:.{digits}f}" for v in np.ravel(a))
+
+
+def decompose(mi, args):
+    """First-scattered light by path type, traced and delivered; crossing counts; the area-light limit (docstring)."""
+    from page import Page
+
+    from harness.reference import connection_power, losses, specular_paths
+
+    page = Page("mnee_chains", "Manifold connections on curved and non-convex meshes: what they deliver, what they miss")
+    page.para(
+        "The power that first scatters in the medium, traced from the point light through every specular path "
+        f"({args.photons} photons split deterministically at each boundary hit, `harness/reference/specular_paths.py`), "
+        "by class: one refraction (`direct`), through other parts of the object (`chain3`: leave, enter, leave), and "
+        "any path with a reflection at the boundary on the way (`reflection`), which no connection of `mneevolpath` "
+        "makes. Against it, the same power as `mneevolpath`'s own connection delivers it "
+        f"(`harness/reference/connection_power.py`, {args.points} uniform points in the medium's box, with its "
+        "standard error): `missed = 1 - delivered / traced`, what `reference.json` records as "
+        "`mnee_losses.first_scatter` (`harness/reference/losses.py`). Shares are per channel R / G / B.")
+    rows, scenes = [], {}
+    for name in args.scenes:
+        scene = nonconvex.torus_hole(1.4) if name == "torus_hole" else load_scene(name)
+        scenes[name] = scene
+        traced = specular_paths.trace(scene, photons=args.photons)
+        by = traced["by_class"]
+        total = sum(by.values(), np.zeros(3))
+        chains = sum((v for k, v in by.items() if k.startswith("chain")), np.zeros(3))
+        got, se, _ = connection_power.delivered(scene, points=args.points)
+        single = dataclasses.replace(scene, boundary=dataclasses.replace(scene.boundary, max_crossings=1))
+        got1, se1, _ = connection_power.delivered(single, points=args.points)
+        direct = by.get("direct", np.zeros(3))
+        rows.append([name, f"{scene.boundary.eta:g}", rgb(direct / total), rgb(chains / total),
+                     rgb(by.get("reflection", np.zeros(3)) / total),
+                     f"{rgb(got1 / direct)} ± {rgb(se1 / direct)}",
+                     f"{rgb(1 - got / total)} ± {rgb(se / total)}"])
+    page.table(["scene", "eta", "direct", "chains", "reflection", "single walk delivered / traced direct",
+                "missed (all)"], rows,
+               note="`direct`, `chains`, `reflection`: shares of the traced first-scattered power. The single walk's "
+                    "delivery (rendered with `max_crossings = 1`) over the traced one-refraction power shows the light "
+                    "lost to single walks that end on another solution than the one that carries it (occluded, or "
+                    "one of several near a caustic of the interface) or fail.")
+    rows = []
+    for name, scene in scenes.items():
+        small = scene.with_resolution(args.size, args.size)
+        found = losses.measure(small)
+        for c, ch in found["channels"].items():
+            rows.append([name, c, " / ".join(f"{ch['crossings'][b]:.3f}" for b in losses.BINS),
+                         f"{ch['single_walk_failed']:.3f}", f"{ch['chain_connected']:.3f}", f"{ch['lost']:.4f}"])
+            if len(found["channels"]) == 1:
+                rows[-1][1] = "RGB"
+    page.table(["scene", "channel", "crossings 1 / 3 / 5 / >= 7", "single walk not converged", "chain connected",
+                "not made (counted)"], rows,
+               note=f"Shares of the connections from medium vertices ({args.size} x {args.size}, "
+                    f"{losses.LOSS_SEEDS} x {losses.LOSS_SPP} spp, `stats`).")
+    scene = nonconvex.torus_hole(1.4).with_resolution(args.size, args.size)
+    traced = specular_paths.trace(scene, photons=args.photons)["by_label"]
+    total = sum(traced.values(), np.zeros(3))
+    rows = []
+    for md in args.depths:
+        # A first scattering at depth 2 reaches the light through at most md - 3 boundary events; mneevolpath
+        # connects one refraction from md = 4 and chains through k crossings from md = k + 3.
+        reach = sum((v for lab, v in traced.items() if len(lab) <= md - 3), np.zeros(3))
+        kmax = max(1, md - 3 - (md - 3 + 1) % 2)
+        sc = dataclasses.replace(scene, boundary=dataclasses.replace(scene.boundary, max_crossings=min(kmax, 9)))
+        got, se, _ = connection_power.delivered(sc, points=args.points)
+        ratio, rse, out = area_ratio(mi, sc, args.area_limit or 0.25, md, args.seeds, args.area_spp, args.spp)
+        rows.append([md, f"{rgb(ratio)} ± {rgb(rse)}", f"{rgb(reach / got)} ± {rgb(reach / got * se / got)}",
+                     f"{rgb(reach / total)}", out])
+    page.table(["max_depth", "sphere light / point light (image)", "traced / delivered (first scatter)",
+                "traced share reachable at this depth", "pixels left out"], rows,
+               note=f"torus_hole, eta 1.4, {args.size} x {args.size}: stock `volpath` with a sphere light of radius "
+                    f"{args.area_limit or 0.25} (radiance I / (pi r^2); {args.seeds} x {args.area_spp} spp) over "
+                    f"`mneevolpath` with the point light ({args.seeds} x {args.spp} spp), image means over the pixels "
+                    "that show no reflection of the bulb, with their standard errors; beside it the ratio the "
+                    "first-scatter figures predict for a first scattering at this depth (paths of at most "
+                    "max_depth - 3 boundary events traced; chains delivered from max_depth = 6). Higher orders of "
+                    "scattering, the image's weighting of the medium and the bulb's radius make the two differ.")
+    page.finish(args.write)
 
 
 def area_limit(mi, args):

@@ -284,6 +284,20 @@ class TestReporting:
         exact, note = losses.verdict(self.losses(1.01 * limit), 0.04)
         assert not exact and "channel R" in note and "max_crossings = 5" in note
 
+    def test_verdict_takes_the_first_scattered_light_missed(self):
+        """The larger of the two estimates decides: a first-scatter shortfall above the limit makes it not exact."""
+        from harness.reference import losses
+
+        limit = losses.LOSS_FRACTION_OF_TARGET * 0.04
+        found = self.losses(0.5 * limit)
+        found["first_scatter"] = {"missed_share": [0.2 * limit, 1.5 * limit, 0.0], "reflection_share": [0.0, 0.01, 0.0]}
+        exact, note = losses.verdict(found, 0.04)
+        assert not exact and "channel G" in note and "first-scattered" in note and "1.00% of it through reflections" \
+            in note, note
+        found["first_scatter"]["missed_share"] = [0.2 * limit, 0.9 * limit, 0.0]
+        exact, note = losses.verdict(found, 0.04)
+        assert exact, note
+
     def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
         import json
 
@@ -305,14 +319,15 @@ class TestReporting:
 
     @pytest.mark.slow
     def test_reference_records_losses_and_exactness(self, mi, tmp_path):
-        """torus_hole (grey: one pass) at 12 x 12: without chains the reference says it is not exact, with them exact."""
+        """torus_hole (grey: one pass) at 12 x 12, eta 1.0001: without chains the reference says it is not exact, with
+        them exact (at eta 1.4 it is not exact either way: reflections and further solutions, ``first_scatter``)."""
         import json
 
         from harness.reference import nonconvex
         from harness.reference.render import render_reference
         from harness.scene.load import scene_hash
 
-        base = nonconvex.torus_hole(1.4, size=12)
+        base = nonconvex.torus_hole(1.0001, size=12)
         grey = np.ones_like(base.medium.sigma_t)
         base = base.with_medium(sigma_t=2.0 * grey, albedo=0.85 * grey)
         for mc, want in ((1, False), (5, True)):
@@ -325,3 +340,7 @@ class TestReporting:
             assert meta["exact"] is want, meta["exact_note"]
             assert r["crossings"]["3"] > 0.1 and set(meta["mnee_losses"]["channels"]) == {"R", "G", "B"}
             assert meta["mnee_losses"]["channels"]["G"]["lost_image_share"] > 0
+            fs = meta["mnee_losses"]["first_scatter"]
+            print(f"  first scatter: missed {fs['missed_share']} +- {fs['missed_share_se']}, reflections "
+                  f"{fs['reflection_share']}")
+            assert max(fs["reflection_share"]) < 1e-3, "eta 1.0001 reflects almost nothing"

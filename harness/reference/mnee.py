@@ -110,10 +110,16 @@ What is not covered, and how it is handled
   as much as their estimated light; with chains it agrees with index-matched ``volpath``.
 * **Specular chains with a reflection**: light that reaches ``x0`` after a reflection at
   the boundary (inside or outside) followed by refractions toward the light is not
-  connected; on a flat interface none exists, on a curved one it is lost (see the
-  area-light figures of ``benchmarks/mnee_chains.py --area-limit``).
-* **A constraint with several solutions** (near caustics of the interface): the walk
-  finds the solution its seed leads to and the others are lost.
+  connected; on a flat interface none exists, on a curved one it is lost.
+* **A constraint with several solutions** (near caustics of the interface, or where the
+  straight seed leads to a solution that another part of the object occludes while another
+  one is free): the walk finds the solution its seed leads to and the others are lost.
+* Both are counted, not fixed: :mod:`harness.reference.losses` traces the light that first
+  scatters in the medium through every specular path (:mod:`harness.reference.specular_paths`)
+  and sets it against what these connections deliver (:mod:`harness.reference.connection_power`);
+  the shortfall is recorded in ``reference.json`` and judged. On a curved, thin medium
+  it is large: ``benchmarks/mnee_chains.py --decompose`` (``docs/benchmarks/mnee_chains.md``)
+  gives the decomposition per scene and the area-light limit beside it.
 * **Walks that fail** (no convergence in ``newton_iterations``, a step below 1e-4, a
   singular Jacobian, a walk that slides off the shape or across a crease of a box): the
   connection contributes nothing.

@@ -1,0 +1,215 @@
+r"""Every specular path from the point lights into the medium, by type: the light a manifold connection must find.
+
+An independent route to what ``mneevolpath``'s connections (:mod:`harness.reference.mnee`)
+deliver and what they leave out: nothing here uses the manifold walk, its Jacobians or its
+seeds. Photons leave each point light (intensity ``I``, W/sr) uniformly inside the cone
+that holds the object's bounding sphere (weight ``I Omega_cone / N``) and follow the
+boundary deterministically: at every hit (Mitsuba's ray cast; the shading normal, as the
+``dielectric`` BSDF refracts with it) the photon splits into a reflected part of weight
+``F`` and a refracted part of weight ``1 - F`` (unpolarised Fresnel, :func:`fresnel`; total
+internal reflection: ``F = 1``), down to :data:`WEIGHT_CUT` of the photon's weight and up to
+``max_events`` boundary events. Power carries no ``eta^2`` (radiance does; power does not).
+
+Along every segment inside the medium the power that scatters *for the first time* there is
+tallied per colour channel,
+
+    P_seg = w * int_0^l sigma_s(s) exp(-int_0^s sigma_t) ds,
+
+by sub-intervals of :data:`SUBSTEPS` equal parts with the grid's nearest voxel (the
+reference's ``nearest`` filter) at each sub-interval's midpoint (exact in a homogeneous
+medium), and ``w`` leaves the segment multiplied by its transmittance. A segment's type is the
+sequence of boundary events since the light (``E`` enter, ``T`` leave, ``R`` reflect inside,
+``r`` reflect outside), collected in classes (:func:`path_class`):
+
+* ``direct``: ``E``, one refraction: what the single manifold walk connects;
+* ``chain3``, ``chain5``, ...: ``ETE``, ``ETETE``, ...: through another part of the object,
+  what the chains of :mod:`harness.reference.mnee_chain` connect (up to ``max_crossings``);
+* ``reflection``: any reflection on the way (``ER``, ``rE``, ``ETRE`` ...): what no manifold
+  connection of ``mneevolpath`` makes.
+
+The share of the first-scattered power in ``reflection`` (:func:`shares`) is the measured
+estimate of the light that the reference loses to specular chains with a reflection vertex
+(:mod:`harness.reference.losses`). Photons still alive after ``max_events`` are reported as
+``truncated``.
+
+Limits: point lights only (the scene's lights); the estimate weighs the medium by where light
+first scatters, not by what the camera sees (a share of the light the medium receives, not of
+the image); the object must be the scene's one closed mesh; ``WEIGHT_CUT`` drops
+branches lighter than that fraction (their power is reported as ``cut``).
+"""
+
+import numpy as np
+
+#: Sub-intervals per medium segment for the first-scattering integral.
+SUBSTEPS = 48
+#: Branches lighter than this fraction of their photon's initial weight are dropped (tallied as ``cut``).
+WEIGHT_CUT = 1e-6
+#: A boundary event's new ray starts this far off the surface (scene units).
+OFFSET = 2e-5
+
+
+def fresnel(cos_i, eta):
+    """Unpolarised Fresnel reflectance and the refracted cosine; ``cos_i > 0`` on the outside, ``eta`` inside / out.
+
+    Returns ``(F, cos_t, e)`` with ``e = n_t / n_i`` the relative index the ray meets
+    (``eta`` entering, ``1 / eta`` leaving); ``F = 1`` beyond the critical angle.
+    """
+    e = np.where(cos_i > 0, eta, 1.0 / eta)
+    ci = np.abs(cos_i)
+    st2 = (1.0 - ci * ci) / (e * e)
+    tir = st2 >= 1.0
+    ct = np.sqrt(np.clip(1.0 - st2, 0.0, 1.0))
+    rs = (ci - e * ct) / (ci + e * ct)
+    rp = (e * ci - ct) / (e * ci + ct)
+    return np.where(tir, 1.0, 0.5 * (rs * rs + rp * rp)), ct, e
+
+
+def path_class(label):
+    """``direct``, ``chain<k>`` or ``reflection`` for an event string (module docstring)."""
+    if "R" in label or "r" in label:
+        return "reflection"
+    return "direct" if label == "E" else f"chain{len(label)}"
+
+
+class _Caster:
+    """Ray casts against the scene's mesh alone (Mitsuba, the variant set by the caller)."""
+
+    def __init__(self, mesh):
+        import mitsuba as mi
+
+        from harness.reference.mitsuba_scene import mitsuba_mesh
+
+        self.mi = mi
+        self.scene = mi.load_dict({"type": "scene", "o": mitsuba_mesh(mesh)})
+
+    def __call__(self, o, d):
+        mi = self.mi
+        ray = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, i].astype(np.float32)) for i in range(3)]),
+                       mi.Vector3f(*[mi.Float(d[:, i].astype(np.float32)) for i in range(3)]))
+        si = self.scene.ray_intersect(ray)
+        valid = np.asarray(si.is_valid())
+        t = np.where(valid, np.asarray(si.t, np.float64), np.inf)
+        p = np.stack([np.asarray(si.p[i], np.float64) for i in range(3)], 1)
+        n = np.stack([np.asarray(si.sh_frame.n[i], np.float64) for i in range(3)], 1)
+        return valid, t, p, n
+
+
+def _grid_lookup(medium, x):
+    """``(sigma_t, albedo)`` (N, 3) at points ``x`` (N, 3): the nearest voxel (voxel i centred at bmin + (i + 0.5) h)."""
+    st, al = np.asarray(medium.sigma_t, np.float64), np.asarray(medium.albedo, np.float64)
+    nz, ny, nx, _ = st.shape
+    lo, hi = np.asarray(medium.bbox_min, np.float64), np.asarray(medium.bbox_max, np.float64)
+    f = (x - lo) / (hi - lo) * np.array([nx, ny, nz])
+    i = np.clip(np.floor(f).astype(np.int64), 0, np.array([nx, ny, nz]) - 1)
+    return st[i[:, 2], i[:, 1], i[:, 0]], al[i[:, 2], i[:, 1], i[:, 0]]
+
+
+def _segment(medium, o, d, length):
+    """First-scattered power per unit weight along each segment, and its transmittance (module docstring)."""
+    dep = np.zeros((len(o), 3))
+    tr = np.ones((len(o), 3))
+    h = length / SUBSTEPS
+    for k in range(SUBSTEPS):
+        st, al = _grid_lookup(medium, o + ((k + 0.5) * h)[:, None] * d)
+        tk = np.exp(-st * h[:, None])
+        dep += tr * al * (1.0 - tk)
+        tr *= tk
+    return dep, tr
+
+
+def _cone_directions(apex, center, radius, n, rng):
+    """``n`` stratified directions uniform in the cone from ``apex`` around the sphere (center, radius); its solid angle."""
+    axis = center - apex
+    dist = np.linalg.norm(axis)
+    axis /= dist
+    cos_max = np.sqrt(max(0.0, 1.0 - (radius / dist) ** 2)) if dist > radius else -1.0
+    u = (np.arange(n) + rng.random(n)) / n
+    cos_t = 1.0 - u * (1.0 - cos_max)
+    phi = 2.0 * np.pi * rng.random(n)
+    sin_t = np.sqrt(np.clip(1.0 - cos_t ** 2, 0.0, 1.0))
+    a = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(axis, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    d = cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * e1 + (sin_t * np.sin(phi))[:, None] * e2
+    return d, 2.0 * np.pi * (1.0 - cos_max)
+
+
+def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
+    """First-scattered power (W, per channel) by path type from every point light of ``scene``.
+
+    ``eta`` defaults to the scene's boundary index. Mitsuba's variant must be set
+    (:func:`harness.reference.mitsuba_scene.use_variant`). Returns ``{"by_label": {label:
+    (3,)}, "by_class": {class: (3,)}, "truncated": (3,), "cut": (3,), "leaked": (3,), "photons": n}``
+    (``leaked``: weight of rays that left the object through a grazing hit without a surface, dropped).
+    """
+    eta = float(scene.boundary.eta if eta is None else eta)
+    cast = _Caster(scene.mesh)
+    rng = np.random.default_rng(seed)
+    v = np.asarray(scene.mesh.vertices, np.float64)
+    center = 0.5 * (v.min(0) + v.max(0))
+    radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.001
+    by_label, truncated, cut, leaked = {}, np.zeros(3), np.zeros(3), np.zeros(3)
+    for light in scene.lights:
+        y = np.asarray(light.position, np.float64)
+        d, omega = _cone_directions(y, center, radius, photons, rng)
+        o = np.tile(y, (photons, 1))
+        w = np.tile(np.asarray(light.intensity, np.float64) * omega / photons, (photons, 1))
+        w0 = w.max(1)
+        inside = np.zeros(photons, bool)
+        labels = np.array([""] * photons, dtype=object)
+        for event in range(max_events + 1):
+            if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
+                break
+            valid, t, p, n = cast(o, d)
+            # A ray "inside" that meets no surface slipped through at a grazing hit (the shading normal
+            # refracts it to the geometric surface's other side): dropped, its weight reported as leaked.
+            leaked += w[inside & ~valid].sum(0)
+            keep = valid
+            o, d, w, w0, inside, labels, t, p, n = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n))
+            if inside.any():
+                dep, tr = _segment(scene.medium, o[inside], d[inside], t[inside])
+                for lab in np.unique(labels[inside]):
+                    m = labels[inside] == lab
+                    by_label[lab] = by_label.get(lab, np.zeros(3)) + (w[inside][m] * dep[m]).sum(0)
+                w[inside] = w[inside] * tr
+            if event == max_events:
+                truncated += w.sum(0)
+                break
+            # ---- split at the boundary: reflected F, refracted 1 - F (shading normal, facing the ray)
+            cos_n = np.sum(d * n, 1)
+            facing = np.where((cos_n < 0)[:, None], n, -n)
+            ci = np.abs(cos_n)
+            F, ct, e = fresnel(np.where(inside, -ci, ci), eta)
+            refl = d + 2.0 * ci[:, None] * facing
+            refr = d / e[:, None] + (ci / e - ct)[:, None] * facing
+            refr /= np.linalg.norm(refr, axis=1, keepdims=True)
+            wr, wt = w * F[:, None], w * (1.0 - F)[:, None]
+            mr = wr.max(1) > WEIGHT_CUT * w0
+            mt = (F < 1.0) & (wt.max(1) > WEIGHT_CUT * w0)
+            cut += wr[~mr].sum(0) + wt[(F < 1.0) & ~mt].sum(0)
+            lab_r = labels + np.where(inside, "R", "r")
+            lab_t = labels + np.where(inside, "T", "E")
+            o = np.concatenate([p[mr] + OFFSET * facing[mr], p[mt] - OFFSET * facing[mt]])
+            d = np.concatenate([refl[mr], refr[mt]])
+            w = np.concatenate([wr[mr], wt[mt]])
+            w0 = np.concatenate([w0[mr], w0[mt]])
+            inside = np.concatenate([inside[mr], ~inside[mt]])
+            labels = np.concatenate([lab_r[mr], lab_t[mt]])
+    by_class = {}
+    for lab, val in by_label.items():
+        by_class[path_class(lab)] = by_class.get(path_class(lab), np.zeros(3)) + val
+    return {"by_label": by_label, "by_class": by_class, "truncated": truncated, "cut": cut, "leaked": leaked,
+            "photons": photons}
+
+
+def shares(traced, max_crossings):
+    """Per channel: the first-scattered power's shares, ``connected`` (direct and chains up to ``max_crossings``),
+    ``reflection`` and ``chains_over_max``, as ``{name: (3,)}`` (zeros where nothing scatters)."""
+    by = traced["by_class"]
+    total = sum(by.values(), np.zeros(3))
+    safe = np.where(total > 0, total, 1.0)
+    over = sum((v for k, v in by.items() if k.startswith("chain") and int(k[5:]) > max_crossings), np.zeros(3))
+    refl = by.get("reflection", np.zeros(3))
+    return {"connected": (total - over - refl) / safe, "reflection": refl / safe, "chains_over_max": over / safe,
+            "total": total}
