@@ -102,6 +102,7 @@ def _cubemap(kernel, chunked):
 
         n = CUBE_K if not chunked else min(CUBE_K, gather_chunk(kernel, fig["L"]))
         return fig["L"] * (1 + n * per)
+    return f
 
 
 def _tree(kernel, chunked):
