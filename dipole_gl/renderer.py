@@ -262,14 +262,8 @@ class DipoleRenderer:
             work.update(more)
             info.update(extra)
             if params.terms == "both":           # S^(1) on the cubemap's G-buffer, added to its (checked) output
-                W, H = scene.camera.width, scene.camera.height
-                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-                out = self._targets.get("dipole_cubemap_out", (W, H), 2)
-                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
-                             add=True)
-                sub, full = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
-                if debug:
-                    dbg["single_pass"] = self._last_single
+                sub, full = self._single_added("dipole_cubemap_out", scene, params, medium, views, timer, work, info,
+                                               dbg)
         elif params.gather == "dense":
             spacing = params.spacing
             if params.fit == "coarsen":
@@ -322,13 +316,7 @@ class DipoleRenderer:
             sub, full, mask = hierarchical.render(self, scene, kernel, params, mat, medium, views, shadow_tex, centre,
                                                   radius, timer, work, info, pre_ms, pre_work, dbg)
             if params.terms == "both":           # S^(1) on the gather's G-buffer, added to its (checked) output
-                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-                out = self._targets.get("dipole_out", (W, H), 2)
-                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
-                             add=True)
-                sub, full = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
-                if debug:
-                    dbg["single_pass"] = self._last_single
+                sub, full = self._single_added("dipole_out", scene, params, medium, views, timer, work, info, dbg)
         else:
             pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():
@@ -403,6 +391,17 @@ class DipoleRenderer:
         self._last_single = {"atlas": atlas_host, "views": views, "position": gview["position"],
                              "normal": gview["normal"], "mask": covered, "single": s1[..., :3]}
         return s1[..., :3]
+
+    def _single_added(self, out_name, scene, params, medium, views, timer, work, info, dbg):
+        """S^(1) on the gather's G-buffer (``dipole_gbuffer``) added to its output target ``out_name``, whose
+        diffusion term the gather has checked already -> (subsurface, full) (H, W, 4) as read back."""
+        W, H = scene.camera.width, scene.camera.height
+        gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+        out = self._targets.get(out_name, (W, H), 2)
+        self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1], add=True)
+        if dbg is not None:
+            dbg["single_pass"] = self._last_single
+        return gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
 
     def _render_single_only(self, scene, params, mat, medium, views, shadow_tex, centre, radius, timer, work, info,
                             pre_ms, pre_work, warnings, dbg):

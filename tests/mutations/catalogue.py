@@ -653,24 +653,11 @@ MUTATIONS = (
              "    keep = 1.0 - f ",
              ("tests/test_delta_eddington.py",),
              "delta-Eddington: sigma_t scaled by (1 - f) instead of (1 - a f), so absorption is no longer kept"),
-    Mutation("cubemap_both_without_single", "glsl", "dipole_gl/renderer.py",
-             "\"dipole_cubemap_out\", (W, H), 2)\n"
-             "                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], "
-             "out.textures[1],\n                             add=True)",
-             "\"dipole_cubemap_out\", (W, H), 2)\n"
-             "                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], "
-             "out.textures[1],\n                             add=False)",
+    Mutation("single_added_left_out", "glsl", "dipole_gl/renderer.py",
+             "info, gb, out.textures[0], out.textures[1], add=True)\n        if dbg is not None:",
+             "info, gb, out.textures[0], out.textures[1], add=False)\n        if dbg is not None:",
              ("tests/test_dipole_single.py::test_both_adds_single_to_the_gathers",),
-             "the cubemap gather under terms = both computes S1 but leaves it out of the image"),
-    Mutation("hierarchical_both_without_single", "glsl", "dipole_gl/renderer.py",
-             "\"dipole_out\", (W, H), 2)\n"
-             "                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], "
-             "out.textures[1],\n                             add=True)",
-             "\"dipole_out\", (W, H), 2)\n"
-             "                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], "
-             "out.textures[1],\n                             add=False)",
-             ("tests/test_dipole_single.py::test_both_adds_single_to_the_gathers",),
-             "the hierarchical gather under terms = both computes S1 but leaves it out of the image"),
+             "the cubemap and hierarchical gathers under terms = both compute S1 but leave it out of the image"),
     # ------------------------------------------------------------------ the hierarchical gather (Jensen & Buhler 2002)
     Mutation("tree_accept_refines", "glsl", "dipole_gl/shaders/gather_tree.comp",
              "        ++evals;\n        i = ln.z;\n    }\n    accum", "        ++evals;\n        i += 1;\n    }\n    accum",
