@@ -242,3 +242,16 @@ class TestGL:
         a = gl_renderer.render(scene, params).subsurface
         b = gl_renderer.render(scene, params.replace(boundary_reflect="rdr")).subsurface
         np.testing.assert_array_equal(a, b)
+
+    def test_dielectric_render_changes(self, gl_renderer):
+        """On a dielectric scene the option changes the image (and the material cache tells the two apart)."""
+        from harness.scene import load_scene
+        from sslpv_gl.params import SSLPVParams
+
+        scene = load_scene("skin_torus_dielectric").with_resolution(32, 32)
+        params = SSLPVParams(N=16, steps=8, rsm_size=256, inject_size=64)
+        a = gl_renderer.render(scene, params).subsurface
+        b = gl_renderer.render(scene, params.replace(boundary_reflect="rdr")).subsurface
+        c = gl_renderer.render(scene, params).subsurface
+        np.testing.assert_array_equal(a, c)
+        assert float(np.abs(a - b).max()) > 1e-3 * float(a.max())
