@@ -9,9 +9,10 @@ committed one), renders SSLPV at N = ``--grid``, K = 32 and ``steady``, mappings
 
 * the subsurface energy ratio and relMSE against the scene's own reference over its comparison mask
   (:func:`harness.metrics.compute`), with the reference's noise floor;
-* the dielectric / index-matched ratio of the mean subsurface radiance over the dielectric reference's
-  mask, for the truth (the two references) and for SSLPV (dielectric render with each option over the
-  index-matched render, which ``rdr`` leaves unchanged as eta = 1 there).
+* the dielectric / index-matched ratio of the subsurface image's sum over both references' masks, for
+  the truth (the two references) and for SSLPV (dielectric render with each setting over the
+  index-matched render, which ``rdr`` leaves unchanged as eta = 1 there), each option also with
+  ``eta2`` (the radiance compression ``1 / eta^2`` leaving the medium, which the truth has).
 
     python benchmarks/boundary_reflect.py [--grid 32] [--refs-only] [--write]
 
@@ -85,6 +86,12 @@ def _mean(img, mask):
     return float(img[mask].sum())
 
 
+def _scores(compute, img, ref):
+    e = compute("energy_ratio", img, ref["subsurface"], ref["mask"]).value
+    r = compute("relmse", img, ref["subsurface"], ref["mask"]).value
+    return f"{e:.3f} / {r:.3g}"
+
+
 def main(argv=None):
     from harness.metrics import compute
     from sslpv_gl.params import SSLPVParams
@@ -105,32 +112,36 @@ def main(argv=None):
     print(f"GL renderer: {renderer.gl_renderer}; N = {args.grid}, outside = {args.outside}, eta2 off, skip 0 for "
           "diffusion (2 otherwise).\n")
     print("Dielectric / index-matched ratio of the subsurface image's sum over both references' comparison masks "
-          "(truth: the two references; SSLPV: its dielectric render with each option over its index-matched "
-          "render, where rdr is a no-op). Then, per render, energy ratio / relMSE against its own reference.\n")
-    print("| scene (eta, R_dr) | noise floor d / m | mapping | K | truth d/m | SSLPV d/m none | SSLPV d/m rdr "
-          "| dielectric none | dielectric rdr | index-matched |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "(truth: the two references; SSLPV: its dielectric render with each setting over its index-matched "
+          "render, where rdr is a no-op and eta2 has no effect). eta2 divides the dielectric render's radiance by "
+          "eta^2 (the radiance compression leaving the medium, which the truth has). Then energy ratio / relMSE "
+          "of each render against its own reference.\n")
+    print("| scene (eta, R_dr) | noise floor d / m | mapping | K | truth d/m | SSLPV d/m none | rdr | none + eta2 "
+          "| rdr + eta2 | E / relMSE: dielectric none | rdr | rdr + eta2 | index-matched |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, diel, (ref_d, fl_d), matched, (ref_m, fl_m) in cases:
         mask = ref_d["mask"] & ref_m["mask"]
         truth = _mean(ref_d["subsurface"], mask) / _mean(ref_m["subsurface"], mask)
         eta = float(diel.boundary.eta)
-        label = f"{name}{' (dielectric copy, eta 1.4)' if name == 'sphere_homogeneous' else ''} ({eta:g}, " \
+        label = f"{name}{' (dielectric copy)' if name == 'sphere_homogeneous' else ''} ({eta:g}, " \
                 f"{reflectance('rdr', eta):.3f})"
         floors = f"{fl_d['subsurface']['relmse']:.2g} / {fl_m['subsurface']['relmse']:.2g}"
         for mapping in MAPPINGS:
             for k in (32, "steady"):
                 p = SSLPVParams(N=args.grid, steps=k, mapping=mapping, outside=args.outside,
                                 **({"skip": 0} if mapping == "diffusion" else {}))
-                cells, sums = [], []
-                for scene, ref, params in ((diel, ref_d, p), (diel, ref_d, p.replace(boundary_reflect="rdr")),
-                                           (matched, ref_m, p)):
-                    img = renderer.render(scene, params).subsurface
-                    e = compute("energy_ratio", img, ref["subsurface"], ref["mask"]).value
-                    r = compute("relmse", img, ref["subsurface"], ref["mask"]).value
-                    cells.append(f"{e:.3f} / {r:.3g}")
-                    sums.append(_mean(img, mask))
-                print(f"| {label} | {floors} | {mapping} | {k} | {truth:.3f} | {sums[0] / sums[2]:.3f} | "
-                      f"{sums[1] / sums[2]:.3f} | {cells[0]} | {cells[1]} | {cells[2]} |", flush=True)
+                settings = (p, p.replace(boundary_reflect="rdr"), p.replace(eta2=True),
+                            p.replace(boundary_reflect="rdr", eta2=True))
+                sums, cells = [], []
+                base = renderer.render(matched, p).subsurface
+                for params in settings:
+                    img = renderer.render(diel, params).subsurface
+                    sums.append(_mean(img, mask) / _mean(base, mask))
+                    if params.eta2 is False or params.boundary_reflect == "rdr":
+                        cells.append(_scores(compute, img, ref_d))
+                cells.append(_scores(compute, base, ref_m))
+                print(f"| {label} | {floors} | {mapping} | {k} | {truth:.3f} | "
+                      + " | ".join(f"{v:.3f}" for v in sums) + " | " + " | ".join(cells) + " |", flush=True)
     return 0
 
 
