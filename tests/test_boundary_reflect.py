@@ -187,20 +187,26 @@ class TestInput:
 
 @pytest.mark.gl
 class TestGL:
-    def test_propagation_matches_twin(self, gl_renderer):
+    @pytest.mark.parametrize("outside", reflect.SUPPORTED_OUTSIDE)
+    def test_propagation_matches_twin(self, gl_renderer, outside):
         inside, mat, c0 = _case()
         r = reflect.reflectance("rdr", 1.6)
         m = {k: v.astype(np.float32) for k, v in mat.items()}
+        m["emit"] = boundary.outside_masks(inside, outside)[1].astype(np.float32)
+        empty = boundary.empty_mask(inside, outside)
+        if empty is not None:
+            m["empty"] = empty.astype(np.float32)
         m.update(r_dr=r, inside=inside)
         prop, acc = gl_renderer.propagate(c0.astype(np.float32), m, DX, 9, 2, "fp32")
         ref_prop, ref_acc = twin.propagate(c0, m["sigma_lpv"], m["sigma_s_prime"], m["g"], DX, 9, 2, r_dr=r,
-                                           inside=inside)
+                                           inside=inside, emit=m["emit"], empty=m.get("empty"))
         for gl, ref, label in ((prop, ref_prop, "prop"), (acc, ref_acc, "accum")):
             scale = float(np.abs(ref[..., 0]).max())
             err = float(np.abs(gl - ref).max())
-            print(f"rdr {label}: max|GL - twin| / max|c00| = {err / scale:.2e} (<= {RTOL_GRID})")
+            print(f"rdr, outside {outside}, {label}: max|GL - twin| / max|c00| = {err / scale:.2e} (<= {RTOL_GRID})")
             assert err <= RTOL_GRID * scale
-        _, acc0 = twin.propagate(c0, m["sigma_lpv"], m["sigma_s_prime"], m["g"], DX, 9, 2)
+        _, acc0 = twin.propagate(c0, m["sigma_lpv"], m["sigma_s_prime"], m["g"], DX, 9, 2, emit=m["emit"],
+                                 empty=m.get("empty"))
         assert np.abs(acc0 - ref_acc).max() > 100 * RTOL_GRID * np.abs(ref_acc[..., 0]).max()
 
     @pytest.mark.parametrize("steps", [10, "steady"])
