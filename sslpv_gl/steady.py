@@ -101,7 +101,11 @@ Solver
 differ, so in red/black order ``P = [[0, P_rb], [P_br, 0]]`` and
 ``(I - P) x = b`` reduces exactly to the half-size system
 ``(I - P_br P_rb) x_b = b_b + P_br b_r``, ``x_r = b_r + P_rb x_b`` (block
-elimination; no approximation). The eigenvalues of ``P`` come in ``+-``
+elimination; no approximation). With ``boundary_reflect = rdr`` (:mod:`sslpv_gl.reflect`)
+``P`` has 4x4 blocks on its diagonal at the surface cells, and the same elimination
+keeps them: ``E = (I - P_rr)^{-1}`` (block diagonal, inverted cell by cell),
+``(I - P_bb - P_br E P_rb) x_b = b_b + P_br E b_r``, ``x_r = E (b_r + P_rb x_b)``
+(:class:`sslpv_gl.transfer._Split`). The eigenvalues of ``P`` come in ``+-``
 pairs, which the reduced operator folds onto one (``rho(P_br P_rb) =
 rho(P)^2``). Measured on a sphere like that of ``benchmarks/bench_steady.py``
 at N = 32 (one colour, rtol 1e-8, one core): BiCGSTAB needed 76 iterations

@@ -28,7 +28,9 @@ exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
 :func:`spectral_radius` estimates ``rho(P)`` on the red/black reduced operator
 (``rho(P_br P_rb) = rho(P)^2``; :mod:`sslpv_gl.steady`, "Solver"): with dense
 eigenvalues up to ``_DENSE_EIG_MAX`` unknowns, else with ARPACK (by power iteration where
-ARPACK stops on an invariant subspace).
+ARPACK stops on an invariant subspace). With the reflection's diagonal blocks that relation
+no longer holds, and ``rho(P)`` is estimated on ``P`` itself (dense up to twice that size, else
+ARPACK with two Ritz values, else power iteration on ``P^2``).
 The input checks shared with :mod:`sslpv_gl.steady` are here too.
 
 Limits
