@@ -768,4 +768,12 @@ MUTATIONS = (
              "params.phase_scaling, params.boundary_reflect)", "params.phase_scaling)",
              ("tests/test_boundary_reflect.py::TestGL::test_dielectric_render_changes",),
              "boundary_reflect missing from the material cache key: a render after the paper's reuses R_dr = 0"),
+    Mutation("rdr_outside_unchecked", "input", "sslpv_gl/params.py",
+             "        check(self.boundary_reflect, self.outside)\n", "",
+             ("tests/test_boundary_reflect.py::TestInput",),
+             "boundary_reflect = rdr accepted with outside = material or extrapolated (no surface, or the boundary twice)"),
+    Mutation("rdr_eta_range_unchecked", "input", "sslpv_gl/reflect.py",
+             "if eta is not None and not ETA_RANGE[0] <= float(eta) <= ETA_RANGE[1]:", "if False:",
+             ("tests/test_boundary_reflect.py::TestInput",),
+             "boundary_reflect = rdr accepted for an eta outside the range where R_dr is defined here"),
 )
