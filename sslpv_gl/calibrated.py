@@ -18,6 +18,7 @@ It writes a TOML file that ``--mapping calibrated:PATH`` reads here::
     precision = "fp32"
     eta2 = false
     phase_scaling = "none"                # optional: "none" when left out
+    boundary_reflect = "none"             # optional: "none" when left out
     [fit]                                 # how it was fitted (free-form provenance)
     loss = "mean over scenes of log relMSE(subsurface)"
     [[budget]]
@@ -62,7 +63,8 @@ PREFIX = "calibrated:"
 #: Renderer settings (``SSLPVParams`` fields) that change the subsurface image and so the
 #: fitted scales, with their types: a calibrated file records each, a render must match it.
 SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
-            "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str}
+            "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str,
+            "boundary_reflect": str}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 
@@ -156,6 +158,7 @@ class _Settings(InputModel):
     precision: Annotated[str, Field(examples=["fp32"])]
     eta2: Annotated[bool, Field(examples=[False])]
     phase_scaling: Annotated[str, Field(examples=["none"])] = "none"     # files that predate it: the paper's
+    boundary_reflect: Annotated[str, Field(examples=["none"])] = "none"  # files that predate it: the paper's
 
 
 class _Budget(InputModel):

@@ -65,6 +65,7 @@ class GridSet:
         # h = exp(-sigma_lpv dx / 2) (destination), h k1 emit (Eq. 3, source), h emit (source),
         # and h k1 without emit (step 1, when every cell passes on its injected light)
         self.material = [tex3("f4") for _ in range(4)]
+        self.r_dr = 0.0                                       # R_dr of boundary_reflect = rdr (u_R), set by upload_material
         self.scale = tex3("f4")                               # per-cell radiance scale (rgb)
         self.scaled = [tex3(dt) for _ in range(3)]            # accumulation x scale: what shading reads
         # The injection atlas: z slice k is the N x N tile (k % tiles_x, k // tiles_x)

@@ -17,6 +17,7 @@ from harness.errors import InputError
 from .boundary import OUTSIDE_MODES
 from .calibrated import load_calibrated, parse_mapping
 from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS
+from .reflect import BOUNDARY_REFLECTS, check
 
 __all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES"]
 
@@ -57,6 +58,9 @@ class SSLPVParams:
                                   "or interior (no light moves between two outside cells; sslpv_gl.boundary)")
     phase_scaling: str = _p("none", "forward-peaked media: none (the paper) or delta-eddington (the forward peak "
                                     "f = g^2 treated as unscattered; sslpv_gl.material)")
+    boundary_reflect: str = _p("none", "dielectric boundary: none (the paper: all light reaching the surface "
+                                       "from inside leaves) or rdr (R_dr(eta) of it returns into the medium, "
+                                       "mirrored; sslpv_gl.reflect); outside vacuum, absorb or interior")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
     skip: int = _p(2, "first propagation steps not accumulated (paper Sec. 4: 2), in [0, steps]")
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")
@@ -99,6 +103,8 @@ class SSLPVParams:
         choice("resample", tuple(RESAMPLERS))
         choice("outside", OUTSIDE)
         choice("phase_scaling", PHASE_SCALINGS)
+        choice("boundary_reflect", BOUNDARY_REFLECTS)
+        check(self.boundary_reflect, self.outside)
         choice("lookup", LOOKUPS)
         choice("precision", PRECISIONS)
         off = self.inject_offset

@@ -68,7 +68,7 @@ def build_program(ctx, precision, acc, warnings, dirs=(_sh.SHADER_DIR,)):
     fmt = FORMATS[precision][0]
     prog = _sh.compute(ctx, "propagate.comp", {"FORMAT": fmt, "LOCAL": LOCAL_SIZE, "ACCUMULATE": acc}, dirs)
     images = ["u_dst_r", "u_dst_g", "u_dst_b"] + (["u_acc_r", "u_acc_g", "u_acc_b"] if acc else [])
-    present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N", "u_lo", "u_hi"],
+    present = _sh.check_uniforms(prog, _SAMPLERS + images + ["u_M", "u_N", "u_lo", "u_hi", "u_R"],
                                  f"propagate[{precision},acc={acc}]", warnings)
     for unit, name in enumerate(_SAMPLERS):
         if name in present:
@@ -82,7 +82,10 @@ def upload_material(grid, material, dx):
     """Write ``material`` (``lpv_material``'s dict, ``(N, N, N, 3)`` each) into ``grid.material``.
 
     Returns True when the material carries a radiance scale other than 1
-    (``radiance_scale`` key), which is then written to ``grid.scale``.
+    (``radiance_scale`` key), which is then written to ``grid.scale``. A material with
+    ``r_dr > 0`` (``boundary_reflect = rdr``, :mod:`sslpv_gl.reflect`) also needs ``inside``
+    (``(N, N, N)`` bool): it goes into the alpha of the ``h k1`` textures and ``r_dr`` into
+    ``grid.r_dr``, which :func:`run` sets as ``u_R``.
     """
     # Per-cell factors of the transfer rule, formed once here instead of per step
     # and neighbour: h = exp(-sigma dx / 2), half a cell of absorption (Sec. 3.2.1),
@@ -99,8 +102,13 @@ def upload_material(grid, material, dx):
     # (outside = interior: no transfer between two of them, propagate.comp); 0 otherwise
     empty = material.get("empty")
     alpha = None if empty is None else np.asarray(empty, dtype=np.float64).reshape(shape)[..., 0]
+    # alpha of u_hk1 (textures 1 and 3, the latter step 1's): 1 in inside cells where the surface
+    # reflects (boundary_reflect = rdr, propagate.comp); 0 otherwise
+    r_dr = float(material.get("r_dr", 0.0))
+    inside = None if r_dr == 0.0 else np.asarray(material["inside"], dtype=np.float64).reshape(shape[:3])
+    grid.r_dr = r_dr
     for i, (tex, arr) in enumerate(zip(grid.material, (half, half * k1 * emit, half * emit, half * k1))):
-        tex.write(_rgba(arr, alpha if i in (0, 2) else None))
+        tex.write(_rgba(arr, alpha if i in (0, 2) else inside))
     return upload_scale(grid, material)
 
 
@@ -162,6 +170,7 @@ def run(ctx, progs, grid, steps, skip, on_step=None, support=None):
     N = grid.N
     for prog in progs.values():
         _sh.set_uniform(prog, "u_N", N)
+        _sh.set_uniform(prog, "u_R", float(getattr(grid, "r_dr", 0.0)))
     if steps <= skip or support is not None:            # nothing accumulated, or cells left out
         clear(grid.accum, grid)
     if support is not None and steps > 0:               # read beyond step 1's region (step 2, or the caller)

@@ -70,7 +70,7 @@ from harness.scene.geometry import grid_inside
 
 from . import inject as injection
 from . import propagate as propagation
-from . import rsm
+from . import reflect, rsm
 from . import shade as shading
 from .diagnostics import _flux
 from .grids import LOCAL_SIZE, GridSet, band0, read_grid, read_layers, support, write_grid, write_layers
@@ -203,8 +203,9 @@ class SSLPVRenderer:
         """
         res = params.resolved()
         eta = float(scene.boundary.eta)
+        reflect.check(params.boundary_reflect, params.outside, eta)
         key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta,
-               params.phase_scaling)
+               params.phase_scaling, params.boundary_reflect)
         mat = self._material_cache.get(key)
         if mat is None:
             med = scene.medium
@@ -220,6 +221,7 @@ class SSLPVRenderer:
             mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
                                sigma_scale=res.sigma_scale, resampled=resampled, phase_scaling=params.phase_scaling)
             mat["inside"] = inside
+            mat["r_dr"] = reflect.reflectance(params.boundary_reflect, eta)   # 0: the paper (sslpv_gl.reflect)
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.
             _put(self._material_cache, key, mat, 8)
         return mat

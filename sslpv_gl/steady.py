@@ -101,7 +101,11 @@ Solver
 differ, so in red/black order ``P = [[0, P_rb], [P_br, 0]]`` and
 ``(I - P) x = b`` reduces exactly to the half-size system
 ``(I - P_br P_rb) x_b = b_b + P_br b_r``, ``x_r = b_r + P_rb x_b`` (block
-elimination; no approximation). The eigenvalues of ``P`` come in ``+-``
+elimination; no approximation). With ``boundary_reflect = rdr`` (:mod:`sslpv_gl.reflect`)
+``P`` has 4x4 blocks on its diagonal at the surface cells, and the same elimination
+keeps them: ``E = (I - P_rr)^{-1}`` (block diagonal, inverted cell by cell),
+``(I - P_bb - P_br E P_rb) x_b = b_b + P_br E b_r``, ``x_r = E (b_r + P_rb x_b)``
+(:class:`sslpv_gl.transfer._Split`). The eigenvalues of ``P`` come in ``+-``
 pairs, which the reduced operator folds onto one (``rho(P_br P_rb) =
 rho(P)^2``). Measured on a sphere like that of ``benchmarks/bench_steady.py``
 at N = 32 (one colour, rtol 1e-8, one core): BiCGSTAB needed 76 iterations
@@ -185,7 +189,8 @@ _GMRES_RESTART = 50
 # ------------------------------------------------------------ steady state
 
 def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rtol=1e-8,
-                 method="bicgstab", maxiter=5000, check_spectrum=True, emit=None, empty=None):
+                 method="bicgstab", maxiter=5000, check_spectrum=True, emit=None, empty=None, r_dr=0.0,
+                 inside=None):
     """Converged accumulation grid ``sum_{k>skip} P^k c0`` (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, info)``.
 
     The paper's accumulation grid once "the propagation grid is empty"
@@ -203,7 +208,8 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
     ``time`` (seconds: ``operator`` (build and red/black split), ``spectrum``,
     ``solve``, ``total``).
 
-    ``emit``: sink cells, ``empty``: empty cells, as in :func:`transfer_operator`.
+    ``emit``: sink cells, ``empty``: empty cells, ``r_dr`` and ``inside``: the surface
+    reflection (:mod:`sslpv_gl.reflect`), as in :func:`transfer_operator`.
 
     Raises ``ValueError`` (one line) on bad input, when ``rho(P) >= 1`` for a
     colour that carries light (the series diverges: no steady state), or
@@ -221,9 +227,9 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
         _bad("maxiter", f"must be an integer >= 1, got {maxiter!r}", "pass e.g. 5000")
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
 
-    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty)
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty, r_dr, inside)
     # step 1 carries the injected light, which has crossed the surface inwards: every cell emits
-    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty)
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty, r_dr, inside)
     t_op = time.perf_counter() - t_start
     red, black = _red_black(N)
     accum = np.zeros_like(c0)
@@ -262,7 +268,7 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
                      "check sigma_lpv >= 0 and |k1| <= 1, or use a fixed step count")
 
         t0 = time.perf_counter()
-        rhs = b[black] + split.P_br @ b[red]
+        rhs = b[black] + split.P_br @ split.apply_e(b[red])
         # the red rows of the full residual vanish (x_r is formed exactly), its
         # black rows are the reduced residual: scale rtol so that it bounds
         # the full system's relative residual, as documented
@@ -282,7 +288,7 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
                                   callback=count, callback_type="pr_norm")
         x = np.empty_like(b)
         x[black] = xb
-        x[red] = b[red] + split.P_rb @ xb
+        x[red] = split.apply_e(b[red] + split.P_rb @ xb)
         # check on the full system, independent of the solver's own estimate
         res = float(np.linalg.norm(x - P @ x - b) / np.linalg.norm(b))
         info["time"]["solve"] += time.perf_counter() - t0
@@ -321,7 +327,7 @@ def remaining_fraction(c, c0):
 
 
 def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=4096, skip=2, matrices=None,
-                    emit=None, empty=None):
+                    emit=None, empty=None, r_dr=0.0, inside=None):
     """Propagate until the light is gone (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, steps_used, remaining)``.
 
     ``steps = auto``: apply the one-step operator (same rule as
@@ -340,8 +346,9 @@ def propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, max_steps=409
     if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < skip:
         _bad("max_steps", f"must be an integer >= skip ({skip}), got {max_steps!r}", "raise max_steps")
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
-    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty)
-    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty)   # step 1: every cell emits
+    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty, r_dr, inside)
+    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty, r_dr,
+                                                      inside)   # step 1: every cell emits
 
     c = [c0[..., col, :].reshape(-1).copy() for col in range(3)]
     inj = np.abs(c0[..., 0]).sum(axis=(0, 1, 2))

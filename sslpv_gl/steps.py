@@ -68,7 +68,8 @@ def propagate_and_shade(renderer, scene, params, ks, resolved, grid, dx, c0, bou
         from .steady import steady_state
 
         acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
-                                 skip=params.skip, emit=material["emit"], empty=material.get("empty"))
+                                 skip=params.skip, emit=material["emit"], empty=material.get("empty"),
+                                 r_dr=material.get("r_dr", 0.0), inside=material["inside"])
         write_grid(grid.accum, acc, params.precision)
         ctx.finish()
         prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost

@@ -14,7 +14,9 @@ the SOURCE cell), ``M_s`` = :func:`sslpv_gl.sh.propagation_matrices` (Sec. 4),
 nothing enters from outside the grid. Colours are independent.
 ``emit`` (default 1) multiplies what a source cell sends on (0: a sink cell), and
 ``empty`` multiplies the entry from ``s`` to ``d`` by ``1 - empty[s] empty[d]``
-(``outside = interior``).
+(``outside = interior``). ``r_dr`` with ``inside`` (``boundary_reflect = rdr``,
+:mod:`sslpv_gl.reflect`) scales the entries across surface faces by ``1 - r_dr`` and
+adds the reflected part as a 4x4 block on the diagonal of each surface cell.
 
 Ordering of the operator
 ------------------------
@@ -26,7 +28,9 @@ exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
 :func:`spectral_radius` estimates ``rho(P)`` on the red/black reduced operator
 (``rho(P_br P_rb) = rho(P)^2``; :mod:`sslpv_gl.steady`, "Solver"): with dense
 eigenvalues up to ``_DENSE_EIG_MAX`` unknowns, else with ARPACK (by power iteration where
-ARPACK stops on an invariant subspace).
+ARPACK stops on an invariant subspace). With the reflection's diagonal blocks that relation
+no longer holds, and ``rho(P)`` is estimated on ``P`` itself (dense up to twice that size, else
+ARPACK with two Ritz values, else power iteration on ``P^2``).
 The input checks shared with :mod:`sslpv_gl.steady` are here too.
 
 Limits
@@ -111,7 +115,8 @@ def _skip(skip):
 
 # ---------------------------------------------------------------- operator
 
-def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None, empty=None):
+def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None, empty=None, r_dr=0.0,
+                      inside=None):
     """One propagation step (Sec. 3.2, Eq. 3, Sec. 4) as sparse matrices, one per colour.
 
     Returns a list of three ``scipy.sparse.csr_matrix`` of shape
@@ -126,6 +131,9 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None,
     (whose first step, like :func:`steady_state`'s, uses the operator without sinks).
     ``empty`` (default 0) marks empty cells: the entry from ``s`` to ``d`` is multiplied
     by ``1 - empty[s] empty[d]`` (``outside = interior``, at every step).
+    ``r_dr`` with ``inside`` ((N, N, N) bool): Eq. (R3) of :mod:`sslpv_gl.reflect`, the
+    entries from an inside to an outside cell times ``1 - r_dr``, and per surface cell a
+    diagonal block ``r_dr exp(-sigma dx) emit M_{+o} F_o S`` per outside neighbour ``o``.
 
     All three matrices share one sparsity pattern (36 entries per cell away
     from the boundary). It is built once, vectorised, directly in CSR order
@@ -143,6 +151,8 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None,
     _finite("matrices", mats)
     k1 = scatter_factors(spr, gg)[..., 1]    # Eq. 3, band 1 of the SOURCE cell; band 0 is 1
     drop = _DROP * max(float(np.abs(mats).max()), np.finfo(float).tiny)
+    reflecting = bool(r_dr) and inside is not None
+    ins = np.asarray(inside, dtype=bool) if reflecting else None
     n_cells = N ** 3
     cells = np.arange(n_cells, dtype=np.int64).reshape(N, N, N)
 
@@ -162,6 +172,8 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None,
         a = np.exp(-0.5 * (sig[src] + sig[dst]) * dxs[axis]) * em[src]
         if emp is not None:                          # no link between two empty cells
             a = a * (1.0 - emp[src] * emp[dst])
+        if reflecting:                               # Eq. (R3): only 1 - R_dr crosses a surface face
+            a = a * np.where((ins[src] & ~ins[dst])[..., None], 1.0 - r_dr, 1.0)
         att[cells[dst].ravel(), j] = a.reshape(-1, 3)
         k1_src[cells[dst].ravel(), j] = k1[src].reshape(-1, 3)
     m = mats[order].transpose(1, 0, 2)                       # (a, s, b)
@@ -192,8 +204,28 @@ def transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None,
         factor[:, :, 1:] = (att[:, :, col] * k1_src[:, :, col])[:, :, None]
         mat = sp.csr_matrix((m_flat * factor.ravel()[csb], indices, indptr), shape=(n, n))
         mat.has_sorted_indices = True
+        if reflecting:
+            mat = (mat + _reflection_blocks(ins, sig[..., col], k1[..., col], em[..., col], dxs, mats, r_dr)).tocsr()
+            mat.sort_indices()
         out.append(mat)
     return out
+
+
+def _reflection_blocks(ins, sig, k1, em, dxs, mats, r_dr):
+    """The diagonal blocks of Eq. (R3) (:mod:`sslpv_gl.reflect`) for one colour -> ``bsr_matrix`` (4 N^3)^2."""
+    from .reflect import AXIS_COEFF, surface_faces
+
+    N = ins.shape[0]
+    blocks = np.zeros((N, N, N, 4, 4))
+    for s, offset in enumerate(SOURCE_OFFSETS):
+        axis = int(np.flatnonzero(offset)[0])
+        flip = np.ones(4)
+        flip[AXIS_COEFF[axis]] = -1.0                # F_o: the lobe mirrored about the face
+        w = surface_faces(ins, offset) * np.exp(-sig * dxs[axis]) * em * r_dr
+        scale = np.concatenate([np.ones((N, N, N, 1)), np.repeat(k1[..., None], 3, axis=-1)], axis=-1)   # S(s)
+        blocks += w[..., None, None] * (mats[s] * flip[None, :])[None, None, None] * scale[..., None, :]
+    n = N ** 3
+    return sp.bsr_matrix((blocks.reshape(n, 4, 4), np.arange(n), np.arange(n + 1)), shape=(4 * n, 4 * n))
 
 
 def _red_black(N):
@@ -204,7 +236,14 @@ def _red_black(N):
 
 
 class _Split:
-    """``P`` in red/black blocks; ``reduced`` applies ``P_br P_rb`` (two half products)."""
+    """``P`` in red/black blocks; ``reduced`` applies the Schur complement's operator on the black cells.
+
+    Face neighbours have opposite parities, so without ``boundary_reflect`` the red/red and
+    black/black blocks are zero and ``reduced`` is ``P_br P_rb``. The reflection of
+    :mod:`sslpv_gl.reflect` puts 4x4 blocks on the diagonal (``P_rr``, ``P_bb``); then
+    ``(I - P) x = b`` reduces exactly to ``(I - P_bb - P_br E P_rb) x_b = b_b + P_br E b_r``,
+    ``x_r = E (b_r + P_rb x_b)`` with ``E = (I - P_rr)^{-1}``, block diagonal (``diag``).
+    """
 
     def __init__(self, P, red, black):
         self.red, self.black = red, black
@@ -212,11 +251,36 @@ class _Split:
         Pb = P[black]
         self.P_rb = Pr[:, black].tocsr()     # red rows, black columns
         self.P_br = Pb[:, red].tocsr()
-        self.products = 0                    # counts of P_br P_rb, ~ one full P product each
+        P_rr = Pr[:, red].tocsr()
+        P_bb = Pb[:, black].tocsr()
+        P_rr.eliminate_zeros()
+        P_bb.eliminate_zeros()
+        self.diag = bool(P_rr.nnz or P_bb.nnz)
+        self.P_bb = P_bb
+        self.E = _block_inverse(P_rr) if self.diag else None
+        self.products = 0                    # counts of the reduced operator, ~ one full P product each
+
+    def apply_e(self, v):
+        """``E v`` (``v`` itself without diagonal blocks)."""
+        return v if self.E is None else self.E @ v
 
     def reduced(self, y):
         self.products += 1
-        return self.P_br @ (self.P_rb @ y)
+        if self.E is None:
+            return self.P_br @ (self.P_rb @ y)
+        return self.P_bb @ y + self.P_br @ (self.E @ (self.P_rb @ y))
+
+
+def _block_inverse(P_rr):
+    """``(I - P_rr)^{-1}`` for a block-diagonal ``P_rr`` of 4x4 blocks -> csr."""
+    n = P_rr.shape[0] // 4
+    coo = P_rr.tocoo()
+    if np.any(coo.row // 4 != coo.col // 4):
+        raise AssertionError("red/red block of P is not block diagonal")
+    blocks = np.zeros((n, 4, 4))
+    np.add.at(blocks, (coo.row // 4, coo.row % 4, coo.col % 4), coo.data)
+    inv = np.linalg.inv(np.eye(4)[None] - blocks)
+    return sp.bsr_matrix((inv, np.arange(n), np.arange(n + 1)), shape=P_rr.shape).tocsr()
 
 
 def spectral_radius(P, tol=1e-3, _split=None):
@@ -235,6 +299,8 @@ def spectral_radius(P, tol=1e-3, _split=None):
     m = _split.black.size
     if m == 0:
         return 0.0
+    if _split.diag:
+        return _full_radius(P, tol)
     if m <= _DENSE_EIG_MAX:
         Q = (_split.P_br @ _split.P_rb).toarray()
         return float(np.sqrt(np.abs(np.linalg.eigvals(Q)).max()))
@@ -256,8 +322,23 @@ def spectral_radius(P, tol=1e-3, _split=None):
     return float(np.sqrt(np.abs(w).max()))
 
 
+def _full_radius(P, tol):
+    """``rho(P)`` on ``P`` itself, for an operator with diagonal blocks (no ``rho(P)^2`` relation)."""
+    n = P.shape[0]
+    if n <= 2 * _DENSE_EIG_MAX:
+        return float(np.abs(np.linalg.eigvals(P.toarray())).max())
+    v0 = np.random.default_rng(12345).random(n) + 0.5
+    try:
+        # k = 2: the near +- pairs of the bipartite part are both kept in the Krylov space
+        w = spla.eigs(P, k=2, which="LM", tol=tol, ncv=min(40, n - 1), maxiter=500, v0=v0,
+                      return_eigenvectors=False)
+    except (spla.ArpackNoConvergence, spla.ArpackError):
+        return _power_radius(lambda y: P @ (P @ y), v0)
+    return float(np.abs(w).max())
+
+
 def _power_radius(apply, v, iterations=400):
-    """sqrt of the growth rate of ``||Q^k v||`` (the reduced operator Q = P_br P_rb) over ``iterations``."""
+    """sqrt of the growth rate of ``||Q^k v||`` (the reduced operator Q = P_br P_rb, or P^2) over ``iterations``."""
     v = v / np.linalg.norm(v)
     rate = 0.0
     for k in range(iterations):

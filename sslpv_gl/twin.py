@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import reflect
 from .optics import fresnel_transmittance, refract
 from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, neighbour_slices, propagation_matrices, scatter_factors
 
@@ -121,7 +122,8 @@ def _shift_from(a, offset):
     return out
 
 
-def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None, empty=None):
+def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None, emit=None, empty=None,
+              r_dr=0.0, inside=None):
     """Propagate and accumulate (Sec. 3.2, Eq. 3, Sec. 4) -> ``(prop, accum)``.
 
     One step, for every destination ``d`` and each of its six neighbours
@@ -145,6 +147,10 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
     ``empty`` (N,N,N,3), default 0: 1 marks an empty cell (``outside = interior``);
     the transfer from ``s`` to ``d`` is multiplied by ``1 - empty[s] empty[d]``, so
     no light ever moves between two empty cells (at every step, the first included).
+    ``r_dr`` with ``inside`` (N,N,N) bool: ``boundary_reflect = rdr``
+    (:mod:`sslpv_gl.reflect`, Eq. (R3)): across each surface face (inside source,
+    outside or off-grid neighbour) the transfer keeps ``1 - r_dr`` and the source
+    receives ``r_dr exp(-sigma_lpv[s] dx) M_{+o} F_o S(s) c_s`` in the same step.
     Returns float64 arrays of ``c0``'s shape.
     """
     c = np.asarray(c0, dtype=np.float64)
@@ -168,6 +174,16 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
             a = a * (1.0 - _shift_from(emp, offset) * emp)
         atten.append(a)
     atten = np.stack(atten)                          # (6, N, N, N, 3)
+    faces = []                                       # (direction, face mask, self attenuation)
+    if r_dr and inside is not None:
+        ins = np.asarray(inside, dtype=bool)
+        for s, offset in enumerate(SOURCE_OFFSETS):
+            axis = int(np.flatnonzero(offset)[0])
+            # d outside receives from an inside source s = d + offset: only 1 - R crosses
+            cross = _shift_from(ins, offset) & ~ins
+            atten[s] *= np.where(cross, 1.0 - r_dr, 1.0)[..., None]
+            # d inside with its neighbour d + offset outside: the image at d + offset sends F c_d
+            faces.append((s, axis, reflect.surface_faces(ins, offset)[..., None] * np.exp(-sig * dxs[axis]) * r_dr))
 
     accum = np.zeros_like(c)
     for step in range(1, int(steps) + 1):
@@ -179,6 +195,8 @@ def propagate(c0, sigma_lpv, sigma_s_prime, g, dx, steps, skip=2, matrices=None,
         for s, offset in enumerate(SOURCE_OFFSETS):
             src = _shift_from(scattered, offset)     # zero outside the grid
             nxt += (src @ mats[s].T) * atten[s][..., None]
+        for s, axis, w in faces:                     # Eq. (R3): the mirrored lobe re-enters its cell
+            nxt += (reflect.mirror(scattered, axis) @ mats[s].T) * w[..., None]
         c = nxt
         if step > skip:
             accum += c
