@@ -334,6 +334,6 @@ def check_table(atlas_size, links, link_level, limit):
     if need > budget:
         lo = next(lv for lv in range(link_level, 13) if P * (atlas_size >> lv) ** 2 * LINK_BYTES <= budget)
         raise InputError("--link-level", "link_level", f"level {link_level} links every texel of a {atlas_size} x "
-                         f"{atlas_size} atlas to {K:,} nodes: a table of {need:,} bytes, over the {budget:,} that fit",
+                         f"{atlas_size} atlas to up to {K:,} nodes: a table of {need:,} bytes, over the {budget:,} that fit",
                          f"use --link-level {lo} or more, or a smaller --atlas-size")
     return need
