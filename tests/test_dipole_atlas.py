@@ -296,14 +296,25 @@ def test_refusals_before_any_frame_work(dipole_renderer):
     with pytest.raises(InputError, match=r"^--atlas-size: atlas_size: the mesh has 5,120 triangles, more than the "
                                          r"4,096 texels of a 64 x 64 atlas .*; raise --atlas-size to 128 or more$"):
         dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", atlas_size=64))
-    with pytest.raises(InputError, match=r"^--link-level: link_level: level 0 links every texel of a 128 x 128 atlas "
-                                         r"to up to 16,384 nodes: .* bytes, over the .* that fit; use --link-level 3 or more"):
-        dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", link_level=0))
-    with pytest.raises(InputError, match=r"^--links: links: 4096 links per texel of a 128 x 128 atlas need a table "
-                                         r"of .* bytes, over the .* that fit; use --links 409 or less"):
-        dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", links=4096))
     with pytest.raises(InputError, match=r"^--gather: gather: the atlas gather precomputes .*; use --method dipole"):
         dipole_renderer.render(scene, "dirpole", DipoleParams(gather="atlas"))
+
+
+@pytest.mark.gl
+def test_a_link_table_over_the_budget_is_refused(dipole_renderer, monkeypatch):
+    from dipole_gl import atlas_gather
+
+    monkeypatch.setattr(atlas_gather, "storage_limit", lambda ctx: 1_000_000)
+    scene = load_scene("layered_dielectric").with_resolution(8, 8)
+    with pytest.raises(InputError, match=r"^--link-level: link_level: level 0 links every texel of a 16 x 16 atlas "
+                                         r"to up to 256 nodes: a table of 1,310,720 bytes, over the 1,000,000 that "
+                                         r"fit; use --link-level 1 or more"):
+        dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", atlas_size=16, link_level=0))
+    with pytest.raises(InputError, match=r"^--links: links: 256 links per texel of a 16 x 16 atlas need a table "
+                                         r"of 1,310,720 bytes, over the 1,000,000 that fit; use --links 195 or less"):
+        dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", atlas_size=16, links=256))
+    assert dipole_renderer.render(scene, "dipole", DipoleParams(gather="atlas", atlas_size=16, link_level=1,
+                                                                terms="diffusion")).info["link_slots"] > 0
 
 
 def test_non_manifold_mesh_is_refused():
