@@ -360,3 +360,11 @@ def test_bad_atlas_on_the_command_line(capsys, tmp_path):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("error: --atlas-size: atlas_size: the mesh has 5,120 "
                                                              "triangles"), (code, err)
+
+
+def test_scheme_flags_on_the_command_line():
+    from harness.methods.params import params_from_cli
+
+    p = params_from_cli("dipole", {"gather": "atlas", "adaptive": "false", "link_level": "2", "atlas_size": "32"})
+    assert (p.adaptive, p.link_level, p.links) == (False, 2, None)
+    assert params_from_cli("dipole", {"gather": "atlas", "adaptive": "true", "links": "8"}).links == 8

@@ -810,4 +810,8 @@ MUTATIONS = (
              'if self.gather == "atlas" and False:',
              ("tests/test_dipole_atlas.py::test_bad_atlas_settings_are_one_line",),
              "an atlas size that is not a power of two accepted"),
+    Mutation("cli_optional_bool_as_text", "physics", "harness/methods/params.py",
+             'if type_name in ("bool", bool, "bool | None"):', 'if type_name in ("bool", bool):',
+             ("tests/test_dipole_atlas.py::test_scheme_flags_on_the_command_line",),
+             "an optional true/false flag (--adaptive) kept as text, so 'false' reads as true"),
 )
