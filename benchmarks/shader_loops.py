@@ -37,8 +37,8 @@ REPO = Path(__file__).resolve().parents[1]
 N_RAD = len(radial_nodes()[0])
 C = budget.DIRPOLE_CALL_ITERATIONS
 NIGHTLY_VERTEX = {"density": 0.5, "range": 2.0}
-#: The atlas gather's links per texel on its suite page (benchmarks/bench_atlas.py suite).
-ATLAS_LINKS = 16
+#: The atlas gather's links per texel at the recommended budget (bench_atlas.py suite --budget 128:links=64).
+ATLAS_LINKS = 64
 
 
 def scene_figures(name, vertex=True):
@@ -163,7 +163,7 @@ def loops(figs):
          "hierarchical descent: an accepted node's lights (dirpole)", "L <= 8", _largest(figs, L), None,
          "no: inside the node's cost above"),
         ("dipole_gl/shaders/gather_atlas.comp", "for (int k = u_first; k < u_end; ++k)",
-         f"atlas gather (pass 2): links per texel (at {ATLAS_LINKS} links, the suite's page)",
+         f"atlas gather (pass 2): links per texel (at {ATLAS_LINKS} links, the suite page's)",
          "links per texel (adaptive: --links; non-adaptive: the level's nodes)", (ATLAS_LINKS, "all"),
          (min(ATLAS_LINKS, budget.atlas_chunk()), "all"),
          "yes (a table within the storage limit can exceed the budget at level 0)"),
