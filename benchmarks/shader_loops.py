@@ -10,7 +10,8 @@ density 0.5 and range 2) under the sizing rule ``fit = coarsen`` (``dipole_gl.si
 vertex gather's longest row comes from the real precomputation (remeshing, neighbourhoods). The
 hierarchical gather's descent is bounded by its octree's node count (``dipole_gl.octree``, at the
 default spacing under the same rule without a pixel-pair budget): at ``epsilon = 0`` a pixel visits
-every lit node.
+every lit node. The atlas gather's pass 2 loops over a texel's links, as many as its setting gives
+(the same for every scene).
 
     .venv/bin/python benchmarks/shader_loops.py            # prints the markdown table
     .venv/bin/python benchmarks/shader_loops.py --write    # and writes docs/benchmarks/shader_loops.md
@@ -36,6 +37,8 @@ REPO = Path(__file__).resolve().parents[1]
 N_RAD = len(radial_nodes()[0])
 C = budget.DIRPOLE_CALL_ITERATIONS
 NIGHTLY_VERTEX = {"density": 0.5, "range": 2.0}
+#: The atlas gather's links per texel at the recommended budget (bench_atlas.py suite --budget 128:links=64).
+ATLAS_LINKS = 64
 
 
 def scene_figures(name, vertex=True):
@@ -159,6 +162,11 @@ def loops(figs):
         ("dipole_gl/shaders/gather_tree.comp", "for (int l = 0; l < u_n_lights; ++l) {\n            vec4 f = agg",
          "hierarchical descent: an accepted node's lights (dirpole)", "L <= 8", _largest(figs, L), None,
          "no: inside the node's cost above"),
+        ("dipole_gl/shaders/gather_atlas.comp", "for (int k = u_first; k < u_end; ++k)",
+         f"atlas gather (pass 2): links per texel (at {ATLAS_LINKS} links, the suite page's)",
+         "links per texel (adaptive: --links; non-adaptive: the level's nodes)", (ATLAS_LINKS, "all"),
+         (min(ATLAS_LINKS, budget.atlas_chunk()), "all"),
+         "yes (a table within the storage limit can exceed the budget at level 0)"),
         ("dipole_gl/shaders/kernels.glsl", "for (int k = 0; k < 3; ++k)",
          "dirpole_sd: the three colours", "3", (3, "all"), None, f"no: counted as {C} per call"),
         ("dipole_gl/shaders/single.comp", "for (int k = 0; k < u_n_march; ++k)",

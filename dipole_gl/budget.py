@@ -32,7 +32,7 @@ run outside the gathers' invocations. The audit of every loop is in ``docs/dipol
 from __future__ import annotations
 
 __all__ = ["LLVMPIPE_LOOP_LIMIT", "ITERATION_BUDGET", "DIRPOLE_CALL_ITERATIONS", "near_iterations", "far_iterations_per_sample",
-           "dense_chunk", "vertex_chunk", "tree_chunk", "chunks"]
+           "dense_chunk", "vertex_chunk", "tree_chunk", "atlas_chunk", "chunks"]
 
 #: llvmpipe's total loop iterations per shader invocation (``LP_MAX_TGSI_LOOP_ITERATIONS``).
 LLVMPIPE_LOOP_LIMIT = 65_535
@@ -72,6 +72,11 @@ def vertex_chunk(kernel, n_lights, budget=ITERATION_BUDGET):
 def tree_chunk(kernel, n_lights, budget=ITERATION_BUDGET):
     """Octree nodes per invocation and dispatch of the hierarchical gather's descent."""
     return int(budget // far_iterations_per_sample(kernel, n_lights))
+
+
+def atlas_chunk(budget=ITERATION_BUDGET):
+    """Links per invocation and dispatch of the atlas gather's pass 2 (one iteration each)."""
+    return int(budget)
 
 
 def chunks(count, size):

@@ -13,6 +13,10 @@ After each frame the renderer recomputes :data:`CHECK_POINTS` points of its own 
 * vertex gather: scattering vertices that the display mesh reads (so they reach covered
   pixels), drawn the same way; the twin evaluates their neighbourhood sums ``B``,
   :func:`dipole_gl.twin.vertex_gather` (the raster pass that interpolates ``B`` is not checked);
+* atlas gather: covered pixels drawn as for the dense gather; the twin recomputes pass 1 (the
+  irradiance of every atlas texel, the MIP-mapped radiosity map), pass 2 at the texels that the
+  pixels' bilinear lookups read and pass 3 at the pixels' atlas coordinates
+  (:mod:`dipole_gl.twin_atlas`; the raster of pass 3 is not checked, its coordinates are read back);
 * single scattering (``terms`` = ``both`` or ``single``, either gather): covered pixels drawn
   the same way; :func:`dipole_gl.single_twin.single_scattering` recomputes S^(1) there from the
   G-buffer's exit points and the light atlas read back (the atlas's raster is not checked).
@@ -38,9 +42,9 @@ import numpy as np
 
 from harness.errors import ResultRefused
 
-from . import octree, single_twin, twin, twin_tree
+from . import octree, single_twin, twin, twin_atlas, twin_tree
 
-__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "check_single", "check_tree",
+__all__ = ["CHECK_POINTS", "CHECK_SEED", "CHECK_RTOL", "check_dense", "check_vertex", "check_single", "check_tree", "check_atlas",
            "compare"]
 
 #: Points recomputed by the twin per render.
@@ -133,3 +137,26 @@ def check_tree(kernel, scene, mat, tree, flux_gl, gbuf, sub, spacing, epsilon):
     L = len(scene.lights)
     return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
             "twin_evaluations": int(visits.sum() * (L if kernel == "dirpole" else 1) + len(tree.positions) * L)}
+
+
+def check_atlas(scene, atlas, lk, flux_gl, frag, sub):
+    """Recompute :data:`CHECK_POINTS` covered pixels of the atlas gather (``frag``: the pass-3 fragments' position,
+    normal, atlas coordinates and mask (H, W, ...)) -> the record for ``info["check"]``."""
+    t = time.perf_counter()
+    eta = float(scene.boundary.eta)
+    P = atlas.texels
+    flux, _ = twin.irradiance(atlas.position.reshape(P, 3), atlas.normal.reshape(P, 3), atlas.area.reshape(P),
+                              scene.lights, eta, flux_gl[..., 3])
+    mips = twin_atlas.radiosity_map(atlas, flux)
+    rows, cols = np.nonzero(frag["mask"])
+    pick = _draw(len(rows))
+    r, c = rows[pick], cols[pick]
+    uv = frag["uv"][r, c]
+    texels = twin_atlas.footprint(atlas.size, uv)
+    scatter = np.zeros((P, 3))
+    scatter[texels] = twin_atlas.gather(lk, mips, texels)
+    ref = twin_atlas.shade(scatter.reshape(atlas.size, atlas.size, 3), uv, frag["position"][r, c],
+                           frag["normal"][r, c], scene.camera.origin, eta)
+    rel = compare(sub[r, c], ref, f"{scene.name}: dipole atlas gather")
+    return {"points": len(pick), "max_rel_diff": rel, "tolerance": CHECK_RTOL, "ms": (time.perf_counter() - t) * 1e3,
+            "twin_evaluations": int(lk.count[texels].sum() + P * len(scene.lights))}

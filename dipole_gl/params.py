@@ -11,11 +11,18 @@ field              gather     meaning
 =================  =========  ==========================================================
 ``gather``         all        ``dense`` (whole surface), ``vertex`` (Hao & Varshney) or
                               ``cubemap`` (the thesis draft's real-time directional dipole) or
-                              ``hierarchical`` (Jensen & Buhler's octree)
+                              ``hierarchical`` (Jensen & Buhler's octree) or ``atlas``
+                              (Carr, Hall & Hart's links into a MIP-mapped atlas)
 ``spacing``        dense,     surface sample spacing, in reduced mean free paths
                    hierarch.  ``l' = 1/sigma_t'`` (default 1)
 ``epsilon``        hierarch.  the octree's solid-angle bound: a node subtending less than
                               ``epsilon`` sr is used whole (default :data:`DEFAULT_EPSILON`)
+``atlas_size``     atlas      texels per side of the atlas, a power of two (default 128)
+``links``          atlas      adaptive scheme: links per texel (default 16, the paper's)
+``link_level``     atlas      non-adaptive scheme: every texel linked to every node of this
+                              MIP level (default: none, the adaptive scheme)
+``adaptive``       atlas      ``true`` (the default when ``link_level`` is not given) or
+                              ``false`` (requires ``link_level``)
 ``range``          vertex     neighbourhood radius, in diffusion lengths ``1/sigma_tr``
                               (default 4)
 ``density``        vertex     scattering vertices per ``l'^2`` (default 1)
@@ -57,7 +64,7 @@ __all__ = ["DipoleParams", "GATHERS", "KERNELS", "FITS", "TERMS", "GATHER_FIELDS
            "DEFAULT_EPSILON"]
 
 KERNELS = ("dipole", "dirpole")
-GATHERS = ("dense", "vertex", "cubemap", "hierarchical")
+GATHERS = ("dense", "vertex", "cubemap", "hierarchical", "atlas")
 #: What a setting over the gather's budget does (:mod:`dipole_gl.sizing`); ``refuse`` is the default.
 FITS = ("refuse", "coarsen")
 #: Which terms of the BSSRDF a render adds (``both`` is the default, as Jensen et al. 2001 render it).
@@ -68,14 +75,18 @@ DEFAULT_EPSILON = 0.03
 GATHER_FIELDS = {"dense": {"spacing": 1.0}, "vertex": {"range": 4.0, "density": 1.0},
                  "cubemap": {"cube_size": 64, "light_size": 256, "samples": 32, "frames": 8, "disc_radius": 4.0,
                              "eps_g": EPS_G, "eps_c": EPS_C, "eps_b": EPS_B},
-                 "hierarchical": {"spacing": 1.0, "epsilon": DEFAULT_EPSILON}}
+                 "hierarchical": {"spacing": 1.0, "epsilon": DEFAULT_EPSILON},
+                 "atlas": {"atlas_size": 128, "links": 16, "link_level": None, "adaptive": None}}
+#: The atlas gather's fields checked by hand (a scheme switch, not a range): ``DipoleParams.__post_init__``.
+_SCHEME = ("links", "link_level", "adaptive")
 #: name -> (lowest, highest, lowest allowed, integer)
 LIMITS = {"spacing": (0.05, 10.0, True, False), "range": (0.0, 100.0, False, False),
           "density": (0.01, 100.0, True, False), "cube_size": (8, 2048, True, True),
           "light_size": (16, 4096, True, True), "samples": (1, 65536, True, True), "frames": (1, 4096, True, True),
           "disc_radius": (0.0, 100.0, False, False), "eps_g": (0.0, 16.0, True, False),
           "eps_c": (0.0, 16.0, True, False), "eps_b": (0.0, 64.0, True, False),
-          "epsilon": (0.0, 4.0 * math.pi, True, False)}
+          "epsilon": (0.0, 4.0 * math.pi, True, False), "atlas_size": (8, 4096, True, True),
+          "links": (1, 65536, True, True), "link_level": (0, 12, True, True)}
 DEFAULTS = {k: v for d in GATHER_FIELDS.values() for k, v in d.items()}
 
 
@@ -90,11 +101,20 @@ class DipoleParams:
     gather: str = _p("dense", "surface gather: dense (the kernel over the whole surface, dense stated sampling), "
                               "vertex (Hao & Varshney 2004: per vertex, precomputed neighbourhood factors), "
                               "cubemap (the thesis draft: light buffer, six cube faces, disc samples, frames) or "
-                              "hierarchical (Jensen & Buhler 2002: an octree of the dense samples)")
+                              "hierarchical (Jensen & Buhler 2002: an octree of the dense samples) or atlas "
+                              "(Carr, Hall & Hart 2003: links into a MIP-mapped texture atlas)")
     spacing: float | None = _p(None, "gather=dense or hierarchical: sample spacing in reduced mean free paths "
                                      "1/sigma_t' (default 1), in [0.05, 10]")
     epsilon: float | None = _p(None, f"gather=hierarchical: a node subtending a solid angle below epsilon (sr) is "
                                      f"used whole (default {DEFAULT_EPSILON:g}; 0 is the dense far field), in [0, 4 pi]")
+    atlas_size: int | None = _p(None, "gather=atlas: texels per side of the multiresolution meshed atlas, a power "
+                                      "of two (default 128), in [8, 4096]")
+    links: int | None = _p(None, "gather=atlas, adaptive scheme: links per texel from the priority queue on "
+                                 "throughput (default 16), in [1, 65536]")
+    link_level: int | None = _p(None, "gather=atlas, non-adaptive scheme: link every texel to every node of this "
+                                      "MIP level (default: the adaptive scheme), in [0, log2 atlas-size]")
+    adaptive: bool | None = _p(None, "gather=atlas: true (the default without --link-level) or false (needs "
+                                     "--link-level)")
     range: float | None = _p(None, "gather=vertex: effective scattering range in diffusion lengths 1/sigma_tr "
                                    "(default 4), in (0, 100]")
     density: float | None = _p(None, "gather=vertex: scattering vertices per square reduced mean free path "
@@ -134,11 +154,15 @@ class DipoleParams:
                     owner = "|".join(o for o, n in GATHER_FIELDS.items() if name in n)
                     bad(name, f"belongs to gather={owner}, not gather={self.gather}",
                         f"drop --{name} or use --gather {owner.split('|')[0]}")
+        if self.gather == "atlas":
+            self._scheme(bad)
         for name, default in mine.items():
-            if getattr(self, name) is None:
+            if getattr(self, name) is None and name not in _SCHEME:
                 object.__setattr__(self, name, default)
         for name in mine:
             v = getattr(self, name)
+            if name == "adaptive" or (v is None and name in _SCHEME):
+                continue
             lo, hi, lo_closed, integer = LIMITS[name]
             ok = isinstance(v, int if integer else (int, float)) and not isinstance(v, bool) and math.isfinite(v) \
                 and (v >= lo if lo_closed else v > lo) and v <= hi
@@ -146,6 +170,11 @@ class DipoleParams:
                 bad(name, f"must be {'an integer' if integer else 'a number'} in {'[' if lo_closed else '('}"
                     f"{lo:g}, {hi:g}], got {v!r}", "change the value")
             object.__setattr__(self, name, int(v) if integer else float(v))
+        if self.gather == "atlas" and self.atlas_size & (self.atlas_size - 1):
+            bad("atlas_size", f"must be a power of two, got {self.atlas_size}", "use e.g. 64, 128 or 256")
+        if self.link_level is not None and 1 << self.link_level > self.atlas_size:
+            bad("link_level", f"level {self.link_level} is above the atlas's top level "
+                f"{self.atlas_size.bit_length() - 1}", "use a lower --link-level")
         if self.fit not in (None,) + FITS:
             bad("fit", f"unknown value {self.fit!r}", "use one of: " + ", ".join(FITS))
         if self.fit == "refuse":                       # the default: left out of the label
@@ -155,6 +184,23 @@ class DipoleParams:
         v = self.shadow_size
         if isinstance(v, bool) or not isinstance(v, int) or not 16 <= v <= 8192:
             bad("shadow_size", f"must be an integer in [16, 8192], got {v!r}", "change the value")
+
+    def _scheme(self, bad):
+        """The atlas's link scheme: ``link_level`` given is the non-adaptive one (no ``links``), else adaptive."""
+        if self.link_level is not None:
+            if self.adaptive:
+                bad("adaptive", "the adaptive scheme takes no --link-level", "drop --adaptive or --link-level")
+            if self.links is not None:
+                bad("links", "the non-adaptive scheme links every texel to every node of --link-level",
+                    "drop --links (or --link-level for the adaptive scheme)")
+            object.__setattr__(self, "adaptive", False)
+            return
+        if self.adaptive is False:
+            bad("adaptive", "the non-adaptive scheme needs a level", "give --link-level")
+        if self.adaptive is not None and not isinstance(self.adaptive, bool):
+            bad("adaptive", f"must be true or false, got {self.adaptive!r}", "write true or false")
+        object.__setattr__(self, "adaptive", True)
+        object.__setattr__(self, "links", 16 if self.links is None else self.links)
 
     @staticmethod
     def doc(name):

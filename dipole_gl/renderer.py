@@ -1,4 +1,5 @@
-"""GLSL renderer of SSLPV's classical rivals: the standard and the directional dipole, gathered densely or per vertex.
+"""GLSL renderer of SSLPV's classical rivals: the standard and the directional dipole, gathered densely, per vertex,
+through a cubemap, down an octree or over a texture atlas's links.
 
 ``DipoleRenderer(ctx=None).render(scene, kernel, params) -> DipoleResult`` (``kernel`` is
 ``"dipole"`` or ``"dirpole"``, ``params`` a :class:`dipole_gl.params.DipoleParams`) runs on an
@@ -48,7 +49,9 @@ one process beside an :class:`sslpv_gl.renderer.SSLPVRenderer`.
 
 Precomputation (host, timed apart from the frame, once per scene and setting): the
 medium's coefficients (``material``), the dense samples (``sampling``,
-:mod:`dipole_gl.sampling`), for the hierarchical gather their ``octree`` (:mod:`dipole_gl.octree`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
+:mod:`dipole_gl.sampling`), for the hierarchical gather their ``octree`` (:mod:`dipole_gl.octree`), for the atlas
+gather the ``atlas`` and its ``links`` (:mod:`dipole_gl.atlas`, :mod:`dipole_gl.links`; its frame stages
+are in :mod:`dipole_gl.atlas_gather`), and for the vertex gather ``remesh``, ``neighbourhoods`` and
 ``display`` (:mod:`dipole_gl.vertex`). Each result also carries a device-independent *work
 count* per stage (:data:`WORK_UNITS`).
 
@@ -78,7 +81,7 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import check, cubemap, gbuffer, hierarchical, irradiance, shade, single, sizing, tree_gather
+from . import atlas_gather, check, cubemap, gbuffer, hierarchical, irradiance, shade, single, sizing, tree_gather
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -95,7 +98,8 @@ N_RAD = len(radial_nodes()[0])
 STAGES = {"dense": ("shadow", "gbuffer", "irradiance", "gather", "single"),
           "vertex": ("shadow", "irradiance", "gather", "shading", "gbuffer", "single"),
           "cubemap": (*cubemap.STAGES, "single"),
-          "hierarchical": ("shadow", "gbuffer", "irradiance", "aggregate", "gather", "single")}
+          "hierarchical": ("shadow", "gbuffer", "irradiance", "aggregate", "gather", "single"),
+          "atlas": atlas_gather.STAGES}
 #: What one unit of each stage's work count is.
 WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": "point-light pairs",
               "gather": "kernel evaluations (dipole + vertex: precomputed factors applied)",
@@ -103,7 +107,8 @@ WORK_UNITS = {"shadow": "shadow-map texels", "gbuffer": "pixels", "irradiance": 
               "shading": "pixels + display vertices", "single": "march nodes x lights (covered pixels)",
               "material": "voxels", "sampling": "surface samples",
               "remesh": "scattering vertices", "neighbourhoods": "neighbour pairs", "display": "display vertices",
-              "lightbuffer": "light-buffer texels", "cubemap": "cube-face texels", "combine": "pixels"}
+              "lightbuffer": "light-buffer texels", "cubemap": "cube-face texels", "combine": "pixels",
+              "mipmap": "MIP texels written", "atlas": "atlas texels", "links": "links"}
 
 
 @dataclass
@@ -163,7 +168,10 @@ class DipoleRenderer:
                      "single": lambda w: single.build_program(self.ctx, w),
                      "cube_face": lambda w: cubemap.build_face(self.ctx, w),
                      "cube_gather": lambda w: cubemap.build_gather(self.ctx, key[1], w),
-                     "cube_combine": lambda w: cubemap.build_combine(self.ctx, w)}[key[0]]
+                     "cube_combine": lambda w: cubemap.build_combine(self.ctx, w),
+                     "atlas_radiosity": lambda w: atlas_gather.build_radiosity(self.ctx, w),
+                     "atlas_gather": lambda w: atlas_gather.build_gather(self.ctx, w),
+                     "atlas_shade": lambda w: atlas_gather.build_shade(self.ctx, w)}[key[0]]
             prog = build(self.warnings)
             self._programs[key] = prog
         return prog
@@ -317,6 +325,21 @@ class DipoleRenderer:
                                                   radius, timer, work, info, pre_ms, pre_work, dbg)
             if params.terms == "both":           # S^(1) on the gather's G-buffer, added to its (checked) output
                 sub, full = self._single_added("dipole_out", scene, params, medium, views, timer, work, info, dbg)
+        elif params.gather == "atlas":
+            sub, full, mask, out = atlas_gather.render(self, scene, kernel, params, mat, views, shadow_tex, centre,
+                                                       radius, timer, work, info, pre_ms, pre_work, dbg)
+            if params.terms == "both":           # S^(1) on the G-buffer, added to the (checked) pass-3 images
+                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+                with timer.stage("gbuffer"):
+                    prog = self._program(("gbuffer",))
+                    gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
+                                s, centre, radius)
+                work["gbuffer"] = W * H
+                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[1], out.textures[0],
+                             add=True)
+                full, sub = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
+                if debug:
+                    dbg["single_pass"] = self._last_single
         else:
             pre, points, vbufs = self._fitted_vertex_data(scene, mat, kernel, params)
             for k, v in pre.times_ms.items():

@@ -60,7 +60,8 @@ class TestRegistry:
         (["dipole"], {"grid": "16"}, "--grid: grid: is a parameter of sslpv, not of dipole; drop --grid or add sslpv"),
         (["sslpv"], {"spacing": "1"}, "--spacing: spacing: is a parameter of dipole and dirpole, not of sslpv"),
         (["dirpole"], {"gather": "dense", "range": "3"}, "--range: range: belongs to gather=vertex"),
-        (["dipole"], {"gather": "atlas"}, "--gather: gather: unknown gather 'atlas'; use one of: dense, vertex"),
+        (["dipole"], {"gather": "splat"}, "--gather: gather: unknown gather 'splat'; use one of: dense, vertex, cubemap, "
+                                        "hierarchical, atlas"),
         (["dipole"], {"spacing": "0"}, r"--spacing: spacing: must be a number in \[0.05, 10\], got 0.0"),
         (["dipole"], {"density": "x"}, "--density: density: 'x' is not a number"),
         (["dipole"], {"fit": "auto"}, "--fit: fit: unknown value 'auto'; use one of: refuse, coarsen"),
@@ -190,9 +191,10 @@ class TestBadInputOneLine:
         m = tmp_path / "m.toml"
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\nsteps = [4]\n'
                      '[[also]]\nmethod = "dipole"\ngather = ["vertex"]\ngrid = [8]\n')
-        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: cube_size, density, "
-                                             r"disc_radius, eps_b, eps_c, eps_g, epsilon, fit, frames, gather, light_size, "
-                                             r"method, range, samples, shadow_size, spacing"):
+        with pytest.raises(InputError, match=r"also\[0\]\.grid: is not a known field; use only: adaptive, atlas_size, "
+                                             r"cube_size, density, disc_radius, eps_b, eps_c, eps_g, epsilon, fit, frames, "
+                                             r"gather, light_size, link_level, links, method, range, samples, shadow_size, "
+                                             r"spacing, terms"):
             load_matrix(m)
         m.write_text('scenes = ["thin_ring"]\n[params]\ngrid = [8]\n[[also]]\nmethod = "atlas"\ngather = ["x"]\n')
         with pytest.raises(InputError, match=r"also\[0\]\.method: unknown method 'atlas'"):

@@ -1,10 +1,11 @@
 """The dipole rivals as methods: ``dipole`` (Jensen et al. 2001) and ``dirpole`` (Frisvad et al. 2014).
 
 Both render with :class:`dipole_gl.renderer.DipoleRenderer`; their parameters are
-:class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex|cubemap|hierarchical``, ``--spacing`` for dense and
+:class:`dipole_gl.params.DipoleParams` (``--gather dense|vertex|cubemap|hierarchical|atlas``, ``--spacing`` for dense and
 hierarchical, ``--range`` and ``--density`` for vertex, ``--epsilon`` for hierarchical, ``--cube-size``,
 ``--light-size``, ``--samples``, ``--frames``, ``--disc-radius``, ``--eps-g``, ``--eps-c`` and ``--eps-b`` for cubemap
-(the thesis draft's gather), ``--shadow-size``, ``--fit refuse|coarsen``: a setting over the gather's budget refused
+(the thesis draft's gather), ``--atlas-size``, ``--links``, ``--link-level`` and ``--adaptive`` for atlas (Carr, Hall
+& Hart 2003: ``--link-level`` the non-adaptive scheme, otherwise the adaptive one), ``--shadow-size``, ``--fit refuse|coarsen``: a setting over the gather's budget refused
 or coarsened just enough, :mod:`dipole_gl.sizing`; ``--terms both|diffusion|single``: Jensen et al. 2001's complete
 BSSRDF, the diffusion kernel alone or single scattering alone, :mod:`dipole_gl.single`). A scene with a non-scattering
 voxel inside the mesh (albedo 0) is refused with one line (:mod:`dipole_gl.medium`).
@@ -24,6 +25,8 @@ CLI_TO_FIELD = {"gather": "gather", "spacing": "spacing", "range": "range", "den
 #: the cubemap gather's (the thesis draft's real-time directional dipole, :mod:`dipole_gl.cubemap`)
 CLI_TO_FIELD.update({name: name for name in ("cube_size", "light_size", "samples", "frames", "disc_radius", "eps_g",
                                               "eps_c", "eps_b")})
+#: the atlas gather's (Carr, Hall & Hart 2003, :mod:`dipole_gl.atlas_gather`)
+CLI_TO_FIELD.update({name: name for name in ("atlas_size", "links", "link_level", "adaptive")})
 
 _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Hao & Varshney 2004) in GLSL",
            "dirpole": "directional dipole (Frisvad, Hachisuka & Kjeldsen 2014) in GLSL"}
@@ -31,7 +34,7 @@ _TITLES = {"dipole": "standard dipole (Jensen et al. 2001; per-vertex gather: Ha
 
 class DipoleMethod(Method):
     cli = CLI_TO_FIELD
-    stages = ("shadow", "gbuffer", "irradiance", "aggregate", "lightbuffer", "cubemap", "gather", "shading",
+    stages = ("shadow", "gbuffer", "irradiance", "aggregate", "mipmap", "lightbuffer", "cubemap", "gather", "shading",
               "combine", "single")                                       # the union of the gathers'
 
     def __init__(self, kernel, shared):
@@ -42,7 +45,8 @@ class DipoleMethod(Method):
         self.title = _TITLES[kernel]
         self.params_type = DipoleParams
         self.work_units = WORK_UNITS
-        self.precompute_steps = ("material", "sampling", "octree", "remesh", "neighbourhoods", "display")
+        self.precompute_steps = ("material", "sampling", "octree", "atlas", "links", "remesh", "neighbourhoods",
+                                 "display")
         self._shared = shared                          # one renderer (one GL context) for both kernels
 
     def label(self, params):

@@ -27,7 +27,7 @@ def flag(cli_name):
 
 def convert(cli_name, text, type_name):
     """One command-line value -> the field's type (an InputError names the flag)."""
-    if type_name in ("bool", bool):
+    if type_name in ("bool", bool, "bool | None"):
         if text.lower() in ("true", "1", "yes", "on"):
             return True
         if text.lower() in ("false", "0", "no", "off"):

@@ -1,0 +1,248 @@
+"""Carr, Hall & Hart 2003's multiresolution meshed atlas (MMA, their Sec. 2.3 and 4.2.1), built on the host.
+
+:func:`build` turns a mesh into an :class:`Atlas` of ``size x size`` texels (``size`` a power of two):
+
+1. **Binary face clustering** (:func:`cluster_tree`). The root is the whole mesh; each node is split
+   into two neighbouring clusters of ``ceil(n/2)`` and ``floor(n/2)`` faces: a breadth-first growth over
+   the face adjacency (shared, welded edges) from a peripheral face, so the grown half is connected;
+   where the remainder falls apart, the split point in breadth-first order is moved (at most
+   :data:`SPLIT_TRIES` tries, never giving a child more faces than its rectangle's texels) until it
+   is connected, else the remainder's smaller pieces join the grown half when the texels allow, else
+   the balanced split is kept with the remainder in pieces. Leaves are single triangles: ``2T - 1``
+   nodes.
+2. **Packing** (:func:`pack`). The root owns the whole square; a node's rectangle (square or 2:1) is
+   halved for its two children (a square across x into two 2:1 rectangles, a 2:1 rectangle across its
+   long side into two squares). The face clusters at even depth are therefore the squares of a
+   quadtree, so a texel of MIP level ``m`` covers exactly one cluster's ``2^m x 2^m`` block and the
+   MIP-map averages over clusters (Sec. 2.3).
+3. **Per-triangle texels** (:func:`texel_geometry`). A leaf triangle fills its ``w x h`` rectangle as
+   the right triangle on three of its corners (``v0`` lower-left, ``v1`` lower-right, ``v2``
+   upper-left). A texel whose centre lies inside the closed texture triangle (the rasterisation rule,
+   edges included) is a surface patch, of area ``A_tri / (its inside texels)``, at the surface point of
+   its centre (a one-texel rectangle: the centroid); the other texels of the rectangle are the gutter:
+   area 0, at the nearest point of the long edge, so that bilinear interpolation across that edge reads
+   values of the same triangle. Pass 3 clamps its lookup to the rectangle's texel centres (half a texel
+   inside its border: the half-texel gutter), so a bilinear lookup reads texels of its own triangle only.
+
+Limits
+------
+* A leaf's rectangle takes its whole triangle; the upper half of each rectangle is gutter, so about
+  half the texels are patches (the MMA pairs triangles instead).
+* Clusters are connected in the face adjacency when the split allows (``Atlas.disconnected`` counts
+  those that are not); "simply connected" (no holes) is not enforced.
+* Refused (one line, :class:`harness.errors.InputError`): more triangles than texels, a mesh with an
+  edge shared by more than two triangles (non-manifold), a clustering whose subtrees outgrow their
+  rectangles (fix: a larger ``--atlas-size``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from harness.errors import InputError
+
+__all__ = ["Atlas", "build", "cluster_tree", "pack", "texel_geometry", "face_adjacency", "SPLIT_TRIES"]
+
+#: Split points tried in breadth-first order (nearest the middle first) before the remainder's pieces are merged.
+SPLIT_TRIES = 16
+
+
+@dataclass
+class Atlas:
+    size: int                      # texels per side (a power of two)
+    levels: int                    # MIP levels, log2(size) + 1
+    position: np.ndarray           # (size, size, 3) float64: the texel's surface point, [y, x]
+    normal: np.ndarray             # (size, size, 3) interpolated vertex normal (unit)
+    area: np.ndarray               # (size, size) patch area (0 in the gutter)
+    face: np.ndarray               # (size, size) int: the leaf triangle owning the texel
+    rects: np.ndarray              # (2T - 1, 4) int: x0, y0, w, h of every node of the tree
+    children: np.ndarray           # (2T - 1, 2) int, -1 for a leaf
+    leaf_face: np.ndarray          # (2T - 1,) int, -1 for an internal node
+    uv: np.ndarray                 # (T, 3, 2) float32: texture coordinates of each triangle's corners, in [0, 1]
+    face_rect: np.ndarray          # (T, 4) float32: x0, y0, w, h of each triangle's rectangle (texels)
+    disconnected: int              # clusters that are not connected in the face adjacency
+
+    @property
+    def texels(self):
+        return self.size * self.size
+
+
+def face_adjacency(mesh):
+    """Faces sharing an edge, with the vertices welded by position -> list of neighbour lists.
+
+    An edge with more than two faces is refused (non-manifold)."""
+    v = np.asarray(mesh.vertices, np.float64)
+    scale = max(float(np.ptp(v, axis=0).max()), 1e-30)
+    _, weld = np.unique(np.round(v / (scale * 1e-7)).astype(np.int64), axis=0, return_inverse=True)
+    f = weld.reshape(-1)[np.asarray(mesh.faces)]
+    T = len(f)
+    e = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+    owner = np.repeat(np.arange(T), 3)
+    keys, inv, counts = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    if np.any(counts > 2):
+        k = int(np.argmax(counts))
+        raise InputError("mesh", "faces", f"the mesh is non-manifold: edge {tuple(int(x) for x in keys[k])} is "
+                         f"shared by {int(counts[k])} triangles (the atlas's face clustering needs at most two)",
+                         "repair the mesh (split the edge or remove the extra triangles)")
+    order = np.argsort(inv, kind="stable")
+    same = np.nonzero(inv[order][1:] == inv[order][:-1])[0]          # the two instances of a shared edge
+    nb = [[] for _ in range(T)]
+    for a, b in zip(owner[order[same]], owner[order[same + 1]]):
+        if a != b:
+            nb[a].append(int(b))
+            nb[b].append(int(a))
+    return nb
+
+
+def _bfs(start, inside, nb):
+    seen = {start}
+    out = [start]
+    q = deque([start])
+    while q:
+        a = q.popleft()
+        for b in nb[a]:
+            if b in inside and b not in seen:
+                seen.add(b)
+                out.append(b)
+                q.append(b)
+    return out
+
+
+def _components(faces, nb):
+    left = set(faces)
+    comps = []
+    while left:
+        c = _bfs(next(iter(left)), left, nb)
+        comps.append(c)
+        left.difference_update(c)
+    return sorted(comps, key=len, reverse=True)
+
+
+def _split(faces, nb, cap):
+    """Two neighbouring halves of ``faces``, neither over ``cap`` faces (see the module docstring)."""
+    inside = set(faces)
+    n = len(faces)
+    comps = _components(faces, nb)
+    k = (n + 1) // 2
+    if len(comps) > 1:                          # a disconnected cluster: whole components, largest first
+        a, b = [], []
+        for c in comps:
+            (a if len(a) <= len(b) else b).extend(c)
+        if max(len(a), len(b)) <= cap:
+            return a, b
+        faces = [f for c in comps for f in c]
+        return faces[:k], faces[k:]
+    far = _bfs(faces[0], inside, nb)[-1]        # a peripheral face
+    order = _bfs(far, inside, nb)
+    cuts = sorted(range(max(n - cap, 1), min(cap, n - 1) + 1), key=lambda c: (abs(c - k), c))
+    for cut in cuts[:SPLIT_TRIES]:
+        if len(_components(order[cut:], nb)) == 1:
+            return order[:cut], order[cut:]
+    a, rest = order[:k], order[k:]
+    comps = _components(rest, nb)
+    merged = a + [f for c in comps[1:] for f in c]
+    if len(merged) <= cap:
+        return merged, comps[0]
+    return a, rest                              # balance first: the remainder stays in pieces
+
+
+def cluster_tree(mesh, size):
+    """The binary face clustering for a ``size x size`` atlas -> ``(children (2T-1, 2), leaf_face (2T-1,),
+    members)``; node 0 is the root, ``members[j]`` lists the faces of node ``j``. A node at depth ``d`` owns
+    ``size^2 / 2^d`` texels (:func:`pack`), so no split gives a child more faces than that."""
+    nb = face_adjacency(mesh)
+    T = len(mesh.faces)
+    children, leaf, members = [], [], []
+
+    def add(faces):
+        members.append(faces)
+        children.append([-1, -1])
+        leaf.append(faces[0] if len(faces) == 1 else -1)
+        return len(members) - 1
+
+    stack = [(add(list(range(T))), 0)]
+    while stack:
+        j, depth = stack.pop()
+        if len(members[j]) == 1:
+            continue
+        a, b = _split(members[j], nb, (size * size) >> (depth + 1))
+        ca, cb = add(a), add(b)
+        children[j] = [ca, cb]
+        stack += [(cb, depth + 1), (ca, depth + 1)]
+    return np.array(children, np.int64), np.array(leaf, np.int64), members
+
+
+def pack(size, children, members):
+    """Every node's rectangle ``(x0, y0, w, h)``: the root the whole square, each node halved for its children.
+
+    Refuses a subtree with more faces than its rectangle's texels."""
+    rects = np.zeros((len(children), 4), np.int64)
+    rects[0] = (0, 0, size, size)
+    for j in range(len(children)):                # children always come after their parent
+        x0, y0, w, h = rects[j]
+        if len(members[j]) > w * h:
+            raise InputError("--atlas-size", "atlas_size", f"the face clustering puts {len(members[j]):,} triangles "
+                             f"into a {w} x {h} texel region of the {size} x {size} atlas",
+                             f"raise --atlas-size to {2 * size} or more")
+        a, b = children[j]
+        if a < 0:
+            continue
+        if w == h:                                # a square into two 2:1 rectangles
+            rects[a], rects[b] = (x0, y0, w // 2, h), (x0 + w // 2, y0, w // 2, h)
+        else:                                     # a 2:1 rectangle (h = 2 w) into two squares
+            rects[a], rects[b] = (x0, y0, w, h // 2), (x0, y0 + h // 2, w, h // 2)
+    return rects
+
+
+def texel_geometry(mesh, size, rects, leaf_face):
+    """Per texel: surface point, normal, patch area and owning face; per face: its corners' uv and its
+    rectangle (module docstring)."""
+    V, F, N = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces), np.asarray(mesh.normals, np.float64)
+    T = len(F)
+    pos = np.zeros((size, size, 3))
+    nrm = np.zeros((size, size, 3))
+    area = np.zeros((size, size))
+    face = np.full((size, size), -1, np.int64)
+    uv = np.zeros((T, 3, 2), np.float32)
+    face_rect = np.zeros((T, 4), np.float32)
+    tri = V[F]
+    tri_area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    for j in np.nonzero(leaf_face >= 0)[0]:
+        f = int(leaf_face[j])
+        x0, y0, w, h = (int(v) for v in rects[j])
+        i, k = np.meshgrid(np.arange(w), np.arange(h))
+        s, t = (i + 0.5) / w, (k + 0.5) / h              # texel centres in the rectangle, [0, 1]^2
+        inside = s + t <= 1.0 + 1e-12                    # the closed texture triangle (rasterisation rule)
+        tot = np.where(inside, 1.0, s + t)
+        s, t = s / tot, t / tot                          # the gutter: nearest point of the long edge
+        b = np.stack([1.0 - s - t, s, t], axis=-1)
+        if w * h == 1:                                   # one texel: the triangle's centroid
+            b = np.full((1, 1, 3), 1.0 / 3.0)
+        pos[y0:y0 + h, x0:x0 + w] = b @ tri[f]
+        n = b @ N[F[f]]
+        nrm[y0:y0 + h, x0:x0 + w] = n / np.linalg.norm(n, axis=-1, keepdims=True)
+        area[y0:y0 + h, x0:x0 + w] = np.where(inside, tri_area[f] / inside.sum(), 0.0)
+        face[y0:y0 + h, x0:x0 + w] = f
+        uv[f] = np.array([[x0, y0], [x0 + w, y0], [x0, y0 + h]]) / size
+        face_rect[f] = (x0, y0, w, h)
+    return pos, nrm, area, face, uv, face_rect
+
+
+def build(mesh, size):
+    """The atlas of ``mesh`` at ``size x size`` texels (module docstring)."""
+    T = len(mesh.faces)
+    if T > size * size:
+        raise InputError("--atlas-size", "atlas_size", f"the mesh has {T:,} triangles, more than the "
+                         f"{size * size:,} texels of a {size} x {size} atlas (each triangle needs one)",
+                         f"raise --atlas-size to {1 << int(np.ceil(np.log2(np.sqrt(T))))} or more")
+    children, leaf, members = cluster_tree(mesh, size)
+    rects = pack(size, children, members)
+    pos, nrm, area, face, uv, face_rect = texel_geometry(mesh, size, rects, leaf)
+    nb = face_adjacency(mesh)
+    disconnected = sum(1 for m in members if len(m) > 1 and len(_components(m, nb)) > 1)
+    return Atlas(size, int(np.log2(size)) + 1, pos, nrm, area, face, rects, children, leaf, uv, face_rect,
+                 disconnected)
