@@ -81,7 +81,8 @@ from harness.errors import InputError
 from sslpv_gl import rsm
 from sslpv_gl.targets import Targets
 
-from . import atlas_gather, check, cubemap, gbuffer, hierarchical, irradiance, shade, single, sizing, tree_gather
+from . import (atlas_gather, check, cubemap, gbuffer, hierarchical, irradiance, shade, single, single_pass, sizing,
+               tree_gather)
 from . import gather as gathers
 from .glsl import MAX_LIGHTS
 from .medium import scene_material
@@ -270,8 +271,8 @@ class DipoleRenderer:
             work.update(more)
             info.update(extra)
             if params.terms == "both":           # S^(1) on the cubemap's G-buffer, added to its (checked) output
-                sub, full = self._single_added("dipole_cubemap_out", scene, params, medium, views, timer, work, info,
-                                               dbg)
+                sub, full = single_pass.added(self, "dipole_cubemap_out", scene, params, medium, views, timer, work,
+                                              info, dbg)
         elif params.gather == "dense":
             spacing = params.spacing
             if params.fit == "coarsen":
@@ -295,8 +296,8 @@ class DipoleRenderer:
                 dispatches = gathers.run_dense(self._program(("dense", kernel)), kernel, points, medium, gb,
                                                out.textures[0], out.textures[1], scene, spacing * mat.mfp)
             if params.terms == "both":
-                s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0],
-                                  out.textures[1], add=True)
+                s1 = single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[0],
+                                     out.textures[1], add=True)
             sub = gbuffer.read(out.textures[0], W, H)
             full = gbuffer.read(out.textures[1], W, H)
             gpos = gbuffer.read(gb.textures[0], W, H)
@@ -324,7 +325,8 @@ class DipoleRenderer:
             sub, full, mask = hierarchical.render(self, scene, kernel, params, mat, medium, views, shadow_tex, centre,
                                                   radius, timer, work, info, pre_ms, pre_work, dbg)
             if params.terms == "both":           # S^(1) on the gather's G-buffer, added to its (checked) output
-                sub, full = self._single_added("dipole_out", scene, params, medium, views, timer, work, info, dbg)
+                sub, full = single_pass.added(self, "dipole_out", scene, params, medium, views, timer, work, info,
+                                              dbg)
         elif params.gather == "atlas":
             sub, full, mask, out = atlas_gather.render(self, scene, kernel, params, mat, views, shadow_tex, centre,
                                                        radius, timer, work, info, pre_ms, pre_work, dbg)
@@ -335,8 +337,8 @@ class DipoleRenderer:
                     gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
                                 s, centre, radius)
                 work["gbuffer"] = W * H
-                self._single(scene, params, medium, views, timer, work, info, gb, out.textures[1], out.textures[0],
-                             add=True)
+                single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[1],
+                                out.textures[0], add=True)
                 full, sub = gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
                 if debug:
                     dbg["single_pass"] = self._last_single
@@ -364,8 +366,8 @@ class DipoleRenderer:
                     gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
                                 s, centre, radius)
                 work["gbuffer"] = W * H
-                s1 = self._single(scene, params, medium, views, timer, work, info, gb, out.textures[1],
-                                  out.textures[0], add=True)
+                s1 = single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[1],
+                                     out.textures[0], add=True)
                 if debug:
                     dbg["single_pass"] = self._last_single
             full = gbuffer.read(out.textures[0], W, H)
@@ -391,41 +393,6 @@ class DipoleRenderer:
             gl_renderer=self.gl_renderer, warnings=list(self.warnings) + warnings + timer.warnings, info=info,
             debug=dbg)
 
-    def _single(self, scene, params, medium, views, timer, work, info, gb, out_sub, out_full, add):
-        """The ``single`` stage (:mod:`dipole_gl.single`) on the G-buffer ``gb``, checked against its twin
-        (``info["single"]``) -> S^(1) (H, W, 3) as read back."""
-        cam = scene.camera
-        W, H, s = cam.width, cam.height, params.shadow_size
-        with timer.stage("single"):
-            rsm_prog = self._program(("rsm",))
-            atlas = single.render_light_atlas(self.ctx, rsm_prog, self._mesh_vao(scene, rsm_prog, "rsm"),
-                                              self._targets, scene, s, views)
-            s1_tex = self._targets.get("dipole_single", (W, H), 1).textures[0]
-            single.run(self._program(("single",)), gb, atlas, medium, out_sub, out_full, s1_tex, scene, views, s,
-                       add)
-        s1 = gbuffer.read(s1_tex, W, H)
-        covered = s1[..., 3] > 0.5
-        work["single"] = int(covered.sum()) * single.N_MARCH * len(scene.lights)
-        gview = {"position": gbuffer.read(gb.textures[0], W, H)[..., :3],
-                 "normal": gbuffer.read(gb.textures[1], W, H)[..., :3], "mask": covered}
-        atlas_host = single.read_atlas(atlas)
-        info["single"] = check.check_single(scene, self._material(scene, info["kernel"])[0].value, views, s,
-                                            atlas_host, gview, s1[..., :3])
-        self._last_single = {"atlas": atlas_host, "views": views, "position": gview["position"],
-                             "normal": gview["normal"], "mask": covered, "single": s1[..., :3]}
-        return s1[..., :3]
-
-    def _single_added(self, out_name, scene, params, medium, views, timer, work, info, dbg):
-        """S^(1) on the gather's G-buffer (``dipole_gbuffer``) added to its output target ``out_name``, whose
-        diffusion term the gather has checked already -> (subsurface, full) (H, W, 4) as read back."""
-        W, H = scene.camera.width, scene.camera.height
-        gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-        out = self._targets.get(out_name, (W, H), 2)
-        self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1], add=True)
-        if dbg is not None:
-            dbg["single_pass"] = self._last_single
-        return gbuffer.read(out.textures[0], W, H), gbuffer.read(out.textures[1], W, H)
-
     def _render_single_only(self, scene, params, mat, medium, views, shadow_tex, centre, radius, timer, work, info,
                             pre_ms, pre_work, warnings, dbg):
         """``terms = single``: the G-buffer and S^(1) alone (no irradiance, no gather)."""
@@ -438,7 +405,8 @@ class DipoleRenderer:
                         centre, radius)
         work["gbuffer"] = W * H
         out = self._targets.get("dipole_out", (W, H), 2)
-        self._single(scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1], add=False)
+        single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
+                        add=False)
         sub = gbuffer.read(out.textures[0], W, H)
         full = gbuffer.read(out.textures[1], W, H)
         if dbg is not None:

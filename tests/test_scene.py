@@ -212,7 +212,7 @@ def _dielectric(eta, roughness=None):
 
 
 class TestBoundary:
-    """``[boundary]`` loads as written; its bad values are cases of ``tests/test_bad_input.py``."""
+    """``[boundary]`` loads as written; its bad values are cases of ``tests/test_bad_scene_input.py``."""
 
     def test_smooth_and_rough_load(self, tmp_path):
         smooth = load_scene(write_scene(tmp_path, _dielectric(1.4, 0.0)))
