@@ -237,11 +237,7 @@ def render(r, scene, kernel, params, mat, medium, views, shadow_tex, centre, rad
         raise InputError("--samples", "samples", f"the cubemap gather would pair {6 * N * N:,} face texels with "
                          f"{k:,} disc samples and {L} lights (over {MAX_FRAME_PAIRS:,} per frame)",
                          "lower --samples or --cube-size")
-    gb = r._targets.get("dipole_gbuffer", (W, H), 5)
-    with timer.stage("gbuffer"):
-        prog = r._program(("gbuffer",))
-        gbuffer.run(ctx, prog, r._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
-                    params.shadow_size, centre, radius)
+    gb = r._gbuffer_pass(scene, views, shadow_tex, params.shadow_size, centre, radius, timer)
     with timer.stage("lightbuffer"):
         prog = r._program(("rsm",))
         lb = light_buffer(ctx, prog, r._mesh_vao(scene, prog, "rsm"), r._targets, scene, views, S)

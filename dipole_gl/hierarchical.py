@@ -77,11 +77,7 @@ def render(renderer, scene, kernel, params, mat, medium, views, shadow_tex, cent
     tree, points = data.tree, data.points
     pre_ms.update(sampling=data.sampling_ms, octree=data.octree_ms)
     pre_work.update(sampling=points.count, octree=tree.nodes)
-    gb = renderer._targets.get("dipole_gbuffer", (W, H), 5)
-    with timer.stage("gbuffer"):
-        prog = renderer._program(("gbuffer",))
-        gbuffer.run(ctx, prog, renderer._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex, s, centre,
-                    radius)
+    gb = renderer._gbuffer_pass(scene, views, shadow_tex, s, centre, radius, timer)
     with timer.stage("irradiance"):
         irradiance.run(renderer._program(("irradiance",)), points, scene, views, shadow_tex, s)
     ctx.finish()

@@ -215,6 +215,17 @@ class DipoleRenderer:
             c[key] = self.ctx.vertex_array(prog, content, index_buffer=ibo, index_element_size=4)
         return c[key]
 
+    def _gbuffer_pass(self, scene, views, shadow_tex, shadow_size, centre, radius, timer):
+        """The camera's G-buffer (:mod:`dipole_gl.gbuffer`) into the shared ``dipole_gbuffer`` target, timed as the
+        ``gbuffer`` stage -> that target."""
+        W, H = scene.camera.width, scene.camera.height
+        gb = self._targets.get("dipole_gbuffer", (W, H), 5)
+        with timer.stage("gbuffer"):
+            prog = self._program(("gbuffer",))
+            gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
+                        shadow_size, centre, radius)
+        return gb
+
     def _dense_points(self, scene, mat, spacing):
         c = self._cache(scene)
         key = ("dense", spacing)
@@ -284,11 +295,7 @@ class DipoleRenderer:
                                  f"{points.count:,} surface samples (over {MAX_FRAME_PAIRS:,} per frame)",
                                  "raise --spacing or render a smaller image")
             pre_ms["sampling"], pre_work["sampling"] = entry.ms, entry.work
-            gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-            with timer.stage("gbuffer"):
-                prog = self._program(("gbuffer",))
-                gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex, s,
-                            centre, radius)
+            gb = self._gbuffer_pass(scene, views, shadow_tex, s, centre, radius, timer)
             with timer.stage("irradiance"):
                 irradiance.run(self._program(("irradiance",)), points, scene, views, shadow_tex, s)
             out = self._targets.get("dipole_out", (W, H), 2)
@@ -331,11 +338,7 @@ class DipoleRenderer:
             sub, full, mask, out = atlas_gather.render(self, scene, kernel, params, mat, views, shadow_tex, centre,
                                                        radius, timer, work, info, pre_ms, pre_work, dbg)
             if params.terms == "both":           # S^(1) on the G-buffer, added to the (checked) pass-3 images
-                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-                with timer.stage("gbuffer"):
-                    prog = self._program(("gbuffer",))
-                    gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
-                                s, centre, radius)
+                gb = self._gbuffer_pass(scene, views, shadow_tex, s, centre, radius, timer)
                 work["gbuffer"] = W * H
                 single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[1],
                                 out.textures[0], add=True)
@@ -360,11 +363,7 @@ class DipoleRenderer:
                                                           vbufs.b_display), out, scene,
                           views, shadow_tex, s, centre, radius)
             if params.terms == "both":
-                gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-                with timer.stage("gbuffer"):
-                    prog = self._program(("gbuffer",))
-                    gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex,
-                                s, centre, radius)
+                gb = self._gbuffer_pass(scene, views, shadow_tex, s, centre, radius, timer)
                 work["gbuffer"] = W * H
                 s1 = single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[1],
                                      out.textures[0], add=True)
@@ -398,11 +397,7 @@ class DipoleRenderer:
         """``terms = single``: the G-buffer and S^(1) alone (no irradiance, no gather)."""
         cam = scene.camera
         W, H, s = cam.width, cam.height, params.shadow_size
-        gb = self._targets.get("dipole_gbuffer", (W, H), 5)
-        with timer.stage("gbuffer"):
-            prog = self._program(("gbuffer",))
-            gbuffer.run(self.ctx, prog, self._mesh_vao(scene, prog, "gbuffer"), gb, scene, views, shadow_tex, s,
-                        centre, radius)
+        gb = self._gbuffer_pass(scene, views, shadow_tex, s, centre, radius, timer)
         work["gbuffer"] = W * H
         out = self._targets.get("dipole_out", (W, H), 2)
         single_pass.run(self, scene, params, medium, views, timer, work, info, gb, out.textures[0], out.textures[1],
