@@ -86,11 +86,18 @@ def _dense_chunked(kernel):
     return f
 
 
-def _vertex(kernel, chunked):
-    def f(fig):
-        n = fig["row"] if not chunked else min(fig["row"], budget.vertex_chunk(kernel, fig["L"]))
-        return n * budget.far_iterations_per_sample(kernel, fig["L"])
-    return f
+def _per_item(field, chunk):
+    """Iterations of a loop over ``fig[field]`` items (a neighbourhood row, the octree's nodes), each costing the
+    far field's iterations per sample; chunked: at most ``chunk(kernel, L)`` items per dispatch."""
+    def make(kernel, chunked):
+        def f(fig):
+            n = fig[field] if not chunked else min(fig[field], chunk(kernel, fig["L"]))
+            return n * budget.far_iterations_per_sample(kernel, fig["L"])
+        return f
+    return make
+
+
+_vertex = _per_item("row", budget.vertex_chunk)
 
 
 CUBE_K = DipoleParams(gather="cubemap").samples
@@ -108,11 +115,7 @@ def _cubemap(kernel, chunked):
     return f
 
 
-def _tree(kernel, chunked):
-    def f(fig):
-        n = fig["nodes"] if not chunked else min(fig["nodes"], budget.tree_chunk(kernel, fig["L"]))
-        return n * budget.far_iterations_per_sample(kernel, fig["L"])
-    return f
+_tree = _per_item("nodes", budget.tree_chunk)
 
 
 def loops(figs):
