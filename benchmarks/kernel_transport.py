@@ -40,32 +40,11 @@ THETAS = (0.0, 60.0)
 EDGES = np.array([0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0])
 #: A ratio whose walk has a relative standard error above this is left out of the tables.
 MAX_REL_SE = 0.1
-NORMAL = np.array([0.0, 0.0, 1.0])
 FIGURE = ROOT / "docs" / "figures" / "kernel_transport"
 
 
 def medium(alpha):
     return kernels.material(np.array([alpha]), np.array([1.0 - alpha]), 1.0)      # sigma_t' = 1, eta = 1
-
-
-def standard(m):
-    def f(r, phi):
-        r = np.broadcast_to(r, np.broadcast_shapes(np.shape(r), np.shape(phi)))
-        return kernels.rd_dipole(r[..., None], m)[..., 0]
-    return f
-
-
-def directional(m, theta_deg):
-    """``pi S_d`` at ``(r cos phi, r sin phi, 0)``; the light enters at the origin travelling towards +x."""
-    th = np.radians(theta_deg)
-    w_i = np.array([-np.sin(th), 0.0, np.cos(th)])
-
-    def f(r, phi):
-        r, phi = np.broadcast_arrays(r, phi)
-        x_o = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros_like(r)], axis=-1)
-        n = np.broadcast_to(NORMAL, x_o.shape)
-        return np.pi * kernels.dirpole_sd(np.zeros_like(x_o), n, np.broadcast_to(w_i, x_o.shape), x_o, n, m)[..., 0]
-    return f
 
 
 def plane_total(f, alpha, panels=48, nodes=16, n_phi=64):
@@ -104,7 +83,7 @@ def totals_table(page, walks):
             mult, mult_se = w.reflectance("multiple")
             exact = float(pa.plane_albedo(mu0, alpha))
             exact_mult = exact - pa.single_scattering_albedo(mu0, alpha)
-            dirp = plane_total(directional(m, theta), alpha)
+            dirp = plane_total(kernels.plane_directional(m, theta), alpha)
             rows.append([f"{alpha:g}", f"{theta:g}", f"{tot:.4f} ± {tot_se:.4f}", f"{exact:.4f}",
                          f"{(tot - exact) / tot_se:+.1f}", f"{mult:.4f} ± {mult_se:.4f}", f"{exact_mult:.4f}",
                          f"{std:.4f}", f"{dirp:.4f}", f"{std / exact_mult:.3f}", f"{dirp / exact_mult:.3f}"])
@@ -137,7 +116,7 @@ def ratio_table(page, walks, kind, theta, sector):
         w = walks[alpha, theta]
         sec = {"ring": None, "forward": rw.FORWARD, "backward": w.backward}[sector]
         phi = (0.0, 2.0 * np.pi) if sec is None else w.sector_edges(sec)
-        f = standard(m) if kind == "standard" else directional(m, theta)
+        f = kernels.plane_standard(m) if kind == "standard" else kernels.plane_directional(m, theta)
         value, se = w.exitance("multiple", sec)
         cols.append(ratio_cells(rw.bin_mean(f, EDGES, phi, nodes=16), value, se))
     rows = [[f"{a:g} – {b:g}"] + [c[i] for c in cols] for i, (a, b) in enumerate(zip(EDGES[:-1], EDGES[1:]))]
@@ -156,7 +135,7 @@ def tested_table(page, walks, alpha=0.999, lo=12.0, hi=24.0):
         p = w.counts[rw.MULTIPLE, :, i0:i1].sum() / w.n_photons
         area = np.pi * (hi * hi - lo * lo)
         value, se = p / area, np.sqrt(p * (1.0 - p) / w.n_photons) / area
-        f = standard(m) if kind == "standard" else directional(m, theta)
+        f = kernels.plane_standard(m) if kind == "standard" else kernels.plane_directional(m, theta)
         model = float(rw.bin_mean(f, np.array([lo, hi]), nodes=16)[0])
         rows.append([kind, f"{theta:g}", f"{value:.4e} ± {se:.1e}", f"{model:.4e}",
                      f"{model / value:.4f} ± {model / value * se / value:.4f}"])
@@ -191,8 +170,8 @@ def figure(walks, cross, out):
         ax.plot(q, [pa.plane_albedo(mu0, a) for a in alphas], "k" + ls, label=f"transport, all orders, {theta:g}°")
         ax.plot(q, [pa.plane_albedo(mu0, a) - pa.single_scattering_albedo(mu0, a) for a in alphas], color="0.55",
                 ls=ls, label=f"transport, orders ≥ 2, {theta:g}°")
-        ax.plot(q, [plane_total(directional(medium(a), theta), a) for a in alphas], color="tab:red", ls=ls,
-                label=f"directional dipole, {theta:g}°")
+        ax.plot(q, [plane_total(kernels.plane_directional(medium(a), theta), a) for a in alphas], color="tab:red",
+                ls=ls, label=f"directional dipole, {theta:g}°")
         for alpha in ALBEDOS:
             v, s = walks[alpha, theta].reflectance("all")
             ax.errorbar([1.0 - alpha], [v], [s], fmt="o" if theta == 0 else "s", color="k", ms=4, mfc="none")
@@ -211,7 +190,8 @@ def figure(walks, cross, out):
             m, w = medium(alpha), walks[alpha, theta]
             value, se = w.exitance("multiple")
             ok = (value > 0) & (se < MAX_REL_SE * np.maximum(value, 1e-300))
-            for f, ls, name in ((standard(m), "-", "standard"), (directional(m, theta), "--", "directional")):
+            for f, ls, name in ((kernels.plane_standard(m), "-", "standard"),
+                                (kernels.plane_directional(m, theta), "--", "directional")):
                 ratio = rw.bin_mean(f, EDGES, nodes=16) / np.where(ok, value, np.nan)
                 ax.plot(mid[ok], ratio[ok], ls, color=colour, marker="o", ms=3, label=f"{name}, α′ = {alpha:g}")
         ax.axhline(1.0, color="0.3", lw=0.6)
@@ -249,7 +229,7 @@ def main(argv=None):
 
     page = Page("kernel_transport", "The dipole kernels against transport theory on a half-space")
     walks, seconds = run_walks(args.photons, args.seed)
-    cross = brentq(lambda a: plane_total(directional(medium(a), 0.0), a) - 1.0, 0.9, 0.999, xtol=1e-6)
+    cross = brentq(lambda a: plane_total(kernels.plane_directional(medium(a), 0.0), a) - 1.0, 0.9, 0.999, xtol=1e-6)
     page.para(
         "A pencil beam of unit power enters an index-matched half-space of isotropic scatterers at the origin, "
         "at normal and at 60° incidence (travelling towards +x); `σt′ = 1`, so every distance is in reduced mean "

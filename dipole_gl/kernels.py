@@ -21,6 +21,10 @@
    * - :func:`ray_source_term`
      - the same paper
      - ``S'_d(x, w, r)``: one ray source in an infinite medium, Eq. (K4)
+   * - :func:`plane_standard`, :func:`plane_directional`
+     - the two above
+     - either kernel's exitance on the plane ``z = 0`` (normal ``+z``) at ``(r cos phi, r sin phi, 0)`` for a
+       pencil beam entering at the origin: ``f(r, phi)``, channel 0 (the half-space the random walk checks)
 
 Coefficients (per colour): ``sigma_s' = sigma_s (1 - g)``, ``sigma_t' = sigma_a + sigma_s'``,
 ``alpha' = sigma_s' / sigma_t'``, ``D = 1 / (3 sigma_t')``, ``sigma_tr = sqrt(sigma_a / D)``.
@@ -43,7 +47,7 @@ from sslpv_gl.boundary import a_of_eta, fresnel_moment
 from sslpv_gl.optics import refract
 
 __all__ = ["material", "rd_dipole", "rd_total", "c_phi", "c_e", "ray_source_term", "dirpole_sd",
-           "DE_FACTOR"]
+           "plane_standard", "plane_directional", "DE_FACTOR"]
 
 #: ``d_e = 2.131 D / sqrt(alpha')``, the extrapolation distance of the directional dipole
 #: (Frisvad et al. 2014, after Davison's boundary condition).
@@ -182,3 +186,26 @@ def dirpole_sd(x_i, n_i, w_i, x_o, n_o, m, clamp=True):
         s_virt[..., c:c + 1] = ray_source_term(xv, wv, dv, n_o, mc)
     sd = s_real - s_virt
     return np.maximum(sd, 0.0) if clamp else sd
+
+
+def plane_standard(m):
+    """``f(r, phi) = R_d(r)`` (Eq. (K1)), channel 0, broadcast over ``r`` and ``phi``."""
+    def f(r, phi):
+        r = np.broadcast_to(r, np.broadcast_shapes(np.shape(r), np.shape(phi)))
+        return rd_dipole(r[..., None], m)[..., 0]
+    return f
+
+
+def plane_directional(m, theta_deg):
+    """``f(r, phi) = pi S_d`` (Eqs. (K3)-(K7)), channel 0, at ``(r cos phi, r sin phi, 0)`` on the plane with
+    normal ``+z``, for light entering at the origin at ``theta_deg`` from the normal, travelling towards +x."""
+    th = np.radians(theta_deg)
+    w_i = np.array([-np.sin(th), 0.0, np.cos(th)])                 # towards the light
+    normal = np.array([0.0, 0.0, 1.0])
+
+    def f(r, phi):
+        r, phi = np.broadcast_arrays(r, phi)
+        x_o = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros_like(r)], axis=-1)
+        n = np.broadcast_to(normal, x_o.shape)
+        return np.pi * dirpole_sd(np.zeros_like(x_o), n, np.broadcast_to(w_i, x_o.shape), x_o, n, m)[..., 0]
+    return f

@@ -29,7 +29,6 @@ EDGES = np.array([12.0, 24.0])
 PHOTONS = 400_000
 DELTA = 0.05
 Z = 4.5
-NORMAL = np.array([0.0, 0.0, 1.0])
 
 
 @pytest.fixture(scope="module")
@@ -42,25 +41,6 @@ def medium():
     return kernels.material(np.array([ALBEDO]), np.array([1.0 - ALBEDO]), 1.0)          # sigma_t' = 1, eta = 1
 
 
-def standard(m):
-    return lambda r, phi: kernels.rd_dipole(np.broadcast_to(r, np.broadcast_shapes(r.shape, phi.shape))[..., None],
-                                            m)[..., 0]
-
-
-def directional(m, theta_deg):
-    """``pi S_d`` at ``x_o = (r cos phi, r sin phi, 0)`` for light entering at the origin travelling towards +x."""
-    th = np.radians(theta_deg)
-    w_i = np.array([-np.sin(th), 0.0, np.cos(th)])                 # towards the light
-
-    def f(r, phi):
-        r, phi = np.broadcast_arrays(r, phi)
-        x_o = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros_like(r)], axis=-1)
-        n = np.broadcast_to(NORMAL, x_o.shape)
-        return np.pi * kernels.dirpole_sd(np.zeros_like(x_o), n, np.broadcast_to(w_i, x_o.shape), x_o, n, m)[..., 0]
-
-    return f
-
-
 def check(kernel, walk, what):
     value, se = walk.exitance("multiple")          # the dipoles model orders >= 2 (order 1 is < 1e-5 of it here)
     model = rw.bin_mean(kernel, EDGES)
@@ -71,9 +51,9 @@ def check(kernel, walk, what):
 
 
 def test_standard_dipole_far_from_the_source(walks, medium):
-    check(standard(medium), walks[0.0], "standard dipole, normal incidence")
+    check(kernels.plane_standard(medium), walks[0.0], "standard dipole, normal incidence")
 
 
 @pytest.mark.parametrize("theta", [0.0, 60.0])
 def test_directional_dipole_far_from_the_source(walks, medium, theta):
-    check(directional(medium, theta), walks[theta], f"directional dipole, {theta} deg")
+    check(kernels.plane_directional(medium, theta), walks[theta], f"directional dipole, {theta} deg")
