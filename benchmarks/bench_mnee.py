@@ -103,13 +103,8 @@ def part_area_limit(mi, args):
     pm = point.mean((1, 2))[:, 0]
     print(f"test 3: sphere light of radius r / point light (grey half-space, single scattering, 8 x 8); "
           f"point light K = 8 x 1024 spp in {tp:.0f} s, rel SE {pm.std(ddof=1) / np.sqrt(8) / pm.mean():.4f}")
-    intensity = np.asarray(setup["intensity"])
     for r in (0.4, 0.25, 0.15, 0.1):
-        bulb = {"type": "sphere", "center": list(setup["light"]), "radius": r,
-                "emitter": {"type": "area", "radiance": {"type": "rgb",
-                                                         "value": (intensity / (np.pi * r * r)).tolist()}}}
-        d = ms.build_scene_dict(scene, lights=False, extra_emitters={"bulb": bulb}, sample_emitters=False,
-                                integrator={"type": "volpath", "max_depth": 4})
+        d = ms.build_scene_dict(scene, **ms.area_light_limit(setup["light"], setup["intensity"], r, 4))
         area, ta = stack(mi, d, range(100, 108), args.area_spp)
         am = area.mean((1, 2))[:, 0]
         ratio = am.mean() / pm.mean()

@@ -133,11 +133,7 @@ def main():
 def area_ratio(mi, scene, r, md, seeds, area_spp, spp):
     """Sphere light (volpath) over point light (the scene's integrator) at ``max_depth = md``: ratio, SE, pixels out."""
     light = scene.lights[0]
-    bulb = {"type": "sphere", "center": [float(c) for c in light.position], "radius": r,
-            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (np.asarray(light.intensity, float)
-                                                                             / (np.pi * r * r)).tolist()}}}
-    area = {"lights": False, "extra_emitters": {"bulb": bulb}, "sample_emitters": False,
-            "integrator": {"type": "volpath", "max_depth": md}}
+    area = ms.area_light_limit(light.position, light.intensity, r, md)
     full, _ = render(mi, ms.build_scene_dict(scene, **area), range(100, 100 + seeds), area_spp)
     absorber, _ = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), area_spp // 4)
     keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
@@ -237,16 +233,11 @@ def area_limit(mi, args):
     print(f"area-light limit, {args.scene} at {args.size} x {args.size}, eta {args.eta}, max_depth {md}, "
           f"sphere light r = {r}: K = {args.seeds} x {args.area_spp} spp (full and absorber), point K = "
           f"{args.seeds} x {args.spp}")
-    intensity = np.asarray(light.intensity, float)
-    bulb = {"type": "sphere", "center": [float(c) for c in light.position], "radius": r,
-            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (intensity / (np.pi * r * r)).tolist()}}}
+    area = ms.area_light_limit(light.position, light.intensity, r, md)
     seeds = range(100, 100 + args.seeds)
-    full, tf = render(mi, ms.build_scene_dict(scene, lights=False, extra_emitters={"bulb": bulb}, sample_emitters=False,
-                                              integrator={"type": "volpath", "max_depth": md}), seeds, args.area_spp)
-    absorber, ta = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, lights=False,
-                                                  extra_emitters={"bulb": bulb}, sample_emitters=False,
-                                                  integrator={"type": "volpath", "max_depth": md}),
-                          range(200, 200 + args.seeds), args.area_spp)
+    full, tf = render(mi, ms.build_scene_dict(scene, **area), seeds, args.area_spp)
+    absorber, ta = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 200 + args.seeds),
+                          args.area_spp)
     # Pixels where the bulb's reflection shows (in any channel, in the absorber image) are left out, so
     # that its noise does not swamp the comparison; the rest are compared as they are.
     keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)

@@ -54,11 +54,7 @@ def test_area_light_limit_through_the_hole_matches_the_counted_loss(mi):
     scene = dataclasses.replace(nonconvex.torus_hole(1.4, size=size),
                                 boundary=dataclasses.replace(nonconvex.torus_hole(1.4).boundary, max_crossings=1))
     light = scene.lights[0]
-    bulb = {"type": "sphere", "center": [float(c) for c in light.position], "radius": r,
-            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": (np.asarray(light.intensity, float)
-                                                                             / (np.pi * r * r)).tolist()}}}
-    area = {"lights": False, "extra_emitters": {"bulb": bulb}, "sample_emitters": False,
-            "integrator": {"type": "volpath", "max_depth": md}}
+    area = ms.area_light_limit(light.position, light.intensity, r, md)
     full = render_stack(mi, ms.build_scene_dict(scene, **area), range(100, 112), 16384)
     absorber = render_stack(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), 4096)
     keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)

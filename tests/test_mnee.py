@@ -246,12 +246,7 @@ def test_small_sphere_light_approaches_point_light(mi):
     setup = dict(halfspace.SETUP, sigma_t=(1.6, 1.6, 1.6), albedo=(0.8, 0.8, 0.8))
     scene = halfspace.validation_scene(1.33, size=8, setup=setup)
     point = render_stack(mi, ms.build_scene_dict(scene, max_depth=4), range(8), 512).mean((1, 2))
-    intensity = np.asarray(setup["intensity"])
-    bulb = {"type": "sphere", "center": list(setup["light"]), "radius": AREA_RADIUS,
-            "emitter": {"type": "area", "radiance": {"type": "rgb",
-                                                     "value": (intensity / (np.pi * AREA_RADIUS ** 2)).tolist()}}}
-    d = ms.build_scene_dict(scene, lights=False, extra_emitters={"bulb": bulb}, sample_emitters=False,
-                            integrator={"type": "volpath", "max_depth": 4})
+    d = ms.build_scene_dict(scene, **ms.area_light_limit(setup["light"], setup["intensity"], AREA_RADIUS, 4))
     area = render_stack(mi, d, range(100, 108), 8192).mean((1, 2))
     ratio = area.mean(0)[0] / point.mean(0)[0]
     se = ratio * np.sqrt(area[:, 0].var(ddof=1) / len(area) / area.mean(0)[0] ** 2

@@ -329,6 +329,18 @@ def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEP
     return d
 
 
+def area_light_limit(position, intensity, radius, max_depth):
+    """``build_scene_dict`` options that replace the scene's point light by a sphere light of ``radius`` at
+    ``position`` with the same power (radiance ``I / (pi r^2)``), rendered by ``volpath`` at ``max_depth`` with the
+    medium's next-event estimation off: as ``radius`` falls its image tends to the point light's, the
+    validation's area-light limit. Limits: one light; a sphere that does not intersect the object."""
+    radiance = (np.asarray(intensity, float) / (np.pi * radius * radius)).tolist()
+    bulb = {"type": "sphere", "center": [float(c) for c in position], "radius": radius,
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": radiance}}}
+    return {"lights": False, "extra_emitters": {"bulb": bulb}, "sample_emitters": False,
+            "integrator": {"type": "volpath", "max_depth": max_depth}}
+
+
 def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, lights=True,
                      phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=None,
                      sample_emitters=None, channel=None, integrator=None):
