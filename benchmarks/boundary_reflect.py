@@ -147,10 +147,7 @@ def main(argv=None):
 
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
-    from page import run
+    from page import named_by, run
 
-    def page_name(argv):
-        return "boundary_reflect" + (f"_{argv[argv.index('--outside') + 1]}" if "--outside" in argv[:-1] else "")
-
-    raise SystemExit(run(main, page_name, "The dielectric boundary in SSLPV's lattice: R_dr against the truth",
+    raise SystemExit(run(main, named_by("boundary_reflect", "--outside"), "The dielectric boundary in SSLPV's lattice: R_dr against the truth",
                          markdown=True))

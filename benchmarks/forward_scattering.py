@@ -94,10 +94,7 @@ def main(argv=None):
 
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO))
-    from page import run
+    from page import named_by, run
 
-    def page_name(argv):
-        return "forward_scattering" + (f"_{argv[argv.index('--outside') + 1]}" if "--outside" in argv[:-1] else "")
-
-    raise SystemExit(run(main, page_name, "Forward-peaked media: delta-Eddington scaling against the truth",
+    raise SystemExit(run(main, named_by("forward_scattering", "--outside"), "Forward-peaked media: delta-Eddington scaling against the truth",
                          markdown=True))

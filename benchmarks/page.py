@@ -206,6 +206,14 @@ class Page:
         return self.write() if write else None
 
 
+def named_by(base, option):
+    """A page name that follows an option of the command: ``named_by("x", "--outside")`` names the run
+    ``x`` by default and ``x_absorb`` under ``--outside absorb`` (one page per value)."""
+    def name(argv):
+        return base + (f"_{argv[argv.index(option) + 1]}" if option in argv[:-1] else "")
+    return name
+
+
 def run(main, name, title, markdown=False):
     """Run a benchmark's ``main()`` with its printout captured on the page ``name``.
 
