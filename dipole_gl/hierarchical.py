@@ -72,7 +72,7 @@ def render(renderer, scene, kernel, params, mat, medium, views, shadow_tex, cent
     L, W, H, s = len(scene.lights), cam.width, cam.height, params.shadow_size
     spacing = params.spacing
     if params.fit == "coarsen":
-        spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing, 1)
+        spacing = sizing.dense_spacing(scene.mesh, mat.mfp, params.spacing)
     data = tree_data(renderer, scene, mat, spacing)
     tree, points = data.tree, data.points
     pre_ms.update(sampling=data.sampling_ms, octree=data.octree_ms)

@@ -64,9 +64,11 @@ def _round(x, up):
     return round((math.ceil(x / step - 1e-9) if up else math.floor(x / step + 1e-9)) * step, 12)
 
 
-def dense_spacing(mesh, mfp, spacing, pixels):
-    """The smallest spacing ``>= spacing`` (in ``l' = mfp``) whose samples fit the dense gather's budgets."""
-    limit = min(MAX_SAMPLES, MAX_FRAME_PAIRS // max(int(pixels), 1))
+def dense_spacing(mesh, mfp, spacing, pixels=None):
+    """The smallest spacing ``>= spacing`` (in ``l' = mfp``) whose samples fit the gather's budgets: the dense
+    gather's (``pixels`` given: samples and pixel-sample pairs per frame) or the hierarchical gather's (``pixels``
+    None: the samples alone)."""
+    limit = MAX_SAMPLES if pixels is None else min(MAX_SAMPLES, MAX_FRAME_PAIRS // max(int(pixels), 1))
 
     def fits(s):
         return sample_count(mesh, s * mfp) <= limit
@@ -74,9 +76,11 @@ def dense_spacing(mesh, mfp, spacing, pixels):
     if fits(spacing):
         return float(spacing)
     if not fits(MAX_SPACING):
+        over = (f"over the {limit:,} samples the octree takes" if pixels is None
+                else f"over {limit:,} for {int(pixels):,} pixels")
+        fix = "use --gather vertex or atlas" if pixels is None else "render a smaller image or use --gather hierarchical"
         raise InputError("--fit", "fit", f"even a spacing of {MAX_SPACING:g} l' gives "
-                         f"{sample_count(mesh, MAX_SPACING * mfp):,} surface samples (over {limit:,} for "
-                         f"{int(pixels):,} pixels)", "render a smaller image or use --gather vertex")
+                         f"{sample_count(mesh, MAX_SPACING * mfp):,} surface samples ({over})", fix)
     lo, hi = float(spacing), MAX_SPACING
     for _ in range(60):
         mid = 0.5 * (lo + hi)

@@ -99,6 +99,25 @@ class TestSizingRule:
             if coarsened:                          # just enough: 1 % finer does not fit
                 assert pixels * sample_count(scene.mesh, 0.99 * used * mat.mfp) > MAX_FRAME_PAIRS, (name, used)
 
+    def test_refusal_names_the_gathers_own_budget(self):
+        """Where no spacing fits, the dense gather's line names its pixel-sample budget and the hierarchical
+        gather's names the octree's samples alone (its cost does not grow as pixels x samples)."""
+        from dipole_gl.medium import scene_material
+        from dipole_gl.sampling import MAX_SAMPLES
+        from dipole_gl.sizing import dense_spacing
+        from harness.regression.accuracy import small_scene
+
+        scene = small_scene("sphere_homogeneous")
+        tiny = scene_material(scene).mfp * 1e-3           # 10 l' is then 1 % of a mean free path
+        with pytest.raises(InputError) as dense:
+            dense_spacing(scene.mesh, tiny, 1.0, 4096)
+        assert "for 4,096 pixels" in str(dense.value) and "--gather hierarchical" in str(dense.value)
+        with pytest.raises(InputError) as tree:
+            dense_spacing(scene.mesh, tiny, 1.0)
+        message = str(tree.value)
+        assert f"over the {MAX_SAMPLES:,} samples the octree takes" in message and "pixels" not in message
+        assert "--gather vertex or atlas" in message
+
     def test_vertex_density(self):
         from dipole_gl.medium import scene_material
         from dipole_gl.sizing import FIT_SHARE, estimated_pairs, mesh_area, vertex_density
