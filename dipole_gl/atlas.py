@@ -41,10 +41,13 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from harness.errors import InputError
 
-__all__ = ["Atlas", "build", "cluster_tree", "pack", "texel_geometry", "face_adjacency", "SPLIT_TRIES"]
+__all__ = ["Atlas", "Topology", "build", "cluster_tree", "pack", "texel_geometry", "face_adjacency", "topology",
+           "welded_faces", "SPLIT_TRIES"]
 
 #: Split points tried in breadth-first order (nearest the middle first) before the remainder's pieces are merged.
 SPLIT_TRIES = 16
@@ -70,14 +73,63 @@ class Atlas:
         return self.size * self.size
 
 
+def welded_faces(mesh):
+    """The faces' corners as vertex indices welded by position (equal up to ``1e-7`` of the mesh's extent) -> (T, 3)."""
+    v = np.asarray(mesh.vertices, np.float64)
+    scale = max(float(np.ptp(v, axis=0).max()), 1e-30)
+    _, weld = np.unique(np.round(v / (scale * 1e-7)).astype(np.int64), axis=0, return_inverse=True)
+    return weld.reshape(-1)[np.asarray(mesh.faces)]
+
+
+@dataclass(frozen=True)
+class Topology:
+    """A face set's topology: ``components`` (through shared edges), ``euler`` (``V - E + F`` of the set's own
+    vertices, edges and faces) and ``boundary_loops`` (connected pieces of the edges that only one of its faces has)."""
+
+    components: int
+    euler: int
+    boundary_loops: int
+
+    @property
+    def disc(self):
+        """One component with ``V - E + F = 1``: a disc (simply connected, one boundary loop)."""
+        return self.components == 1 and self.euler == 1
+
+
+def topology(faces, tri):
+    """The :class:`Topology` of the faces ``faces`` of a mesh whose welded corners are ``tri`` (:func:`welded_faces`).
+
+    Counted from the set alone (scipy's connected components over its shared and boundary edges), not from
+    :func:`face_adjacency`."""
+    t = np.asarray(tri)[np.asarray(faces, np.int64)]
+    n = len(t)
+    if n == 0:
+        return Topology(0, 0, 0)
+    e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+    keys, inv, counts = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    euler = len(np.unique(t)) - len(keys) + n
+
+    def pieces(a, b, m):
+        return connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[0]
+
+    owner = np.repeat(np.arange(n), 3)
+    order = np.argsort(inv, kind="stable")
+    same = np.nonzero(inv[order][1:] == inv[order][:-1])[0]       # the two faces of an inner edge
+    components = pieces(owner[order[same]], owner[order[same + 1]], n)
+    rim = keys[counts == 1]
+    if len(rim) == 0:
+        return Topology(int(components), int(euler), 0)
+    ids, rv = np.unique(rim, return_inverse=True)
+    rv = rv.reshape(-1, 2)
+    return Topology(int(components), int(euler), int(pieces(rv[:, 0], rv[:, 1], len(ids))))
+
+
 def face_adjacency(mesh):
     """Faces sharing an edge, with the vertices welded by position -> list of neighbour lists.
 
     An edge with more than two faces is refused (non-manifold)."""
-    v = np.asarray(mesh.vertices, np.float64)
-    scale = max(float(np.ptp(v, axis=0).max()), 1e-30)
-    _, weld = np.unique(np.round(v / (scale * 1e-7)).astype(np.int64), axis=0, return_inverse=True)
-    f = weld.reshape(-1)[np.asarray(mesh.faces)]
+    f = welded_faces(mesh)
     T = len(f)
     e = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(T), 3)
