@@ -37,6 +37,7 @@ Limits
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
 from dataclasses import dataclass
 
@@ -67,6 +68,7 @@ class Atlas:
     uv: np.ndarray                 # (T, 3, 2) float32: texture coordinates of each triangle's corners, in [0, 1]
     face_rect: np.ndarray          # (T, 4) float32: x0, y0, w, h of each triangle's rectangle (texels)
     disconnected: int              # clusters that are not connected in the face adjacency
+    not_disc: int                  # connected clusters that are not discs (V - E + F != 1), the root included
 
     @property
     def texels(self):
@@ -164,6 +166,33 @@ def _bfs(start, inside, nb):
     return out
 
 
+def _grow(sources, inside, nb):
+    """All of ``inside`` in the order a region grows from ``sources``: next the face with the most neighbours
+    already taken (a face hemmed in on all three sides comes first), then the earliest reached. Every prefix is
+    connected, and the front leaves fewer single faces behind than a breadth-first one."""
+    taken = set(sources)
+    out = list(sources)
+    count, heap, seq = {}, [], 0
+    for a in out:
+        for b in nb[a]:
+            if b in inside and b not in taken:
+                count[b] = count.get(b, 0) + 1
+                heapq.heappush(heap, (-count[b], seq, b))
+                seq += 1
+    while heap:
+        c, _, a = heapq.heappop(heap)
+        if a in taken or -c != count[a]:          # taken already, or a stale entry
+            continue
+        taken.add(a)
+        out.append(a)
+        for b in nb[a]:
+            if b in inside and b not in taken:
+                count[b] = count.get(b, 0) + 1
+                heapq.heappush(heap, (-count[b], seq, b))
+                seq += 1
+    return out
+
+
 def _components(faces, nb):
     left = set(faces)
     comps = []
@@ -174,7 +203,109 @@ def _components(faces, nb):
     return sorted(comps, key=len, reverse=True)
 
 
-def _split(faces, nb, cap):
+def _face_edges(mesh, with_ends=False):
+    """``(welded corners (T, 3), each face's edge ids (T, 3))``, and each edge's two vertices (E, 2) ``with_ends``."""
+    tri = welded_faces(mesh)
+    ev, fe = np.unique(np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2),
+                       axis=0, return_inverse=True)
+    fe = fe.reshape(len(tri), 3)
+    return (tri, fe, ev) if with_ends else (tri, fe)
+
+
+@dataclass(frozen=True)
+class _Edges:
+    tri: list                      # (T, 3) welded corners of each face
+    fe: list                       # (T, 3) each face's edges, as edge ids
+    ev: list                       # (E, 2) each edge's two welded vertices
+
+
+def _across(faces, nb, g):
+    """The order of a connected, non-disc ``faces`` grown (:func:`_grow`) from a shortest strip of faces between two
+    of its boundary loops (halving an annulus across its strip gives two discs), or ``None`` with fewer than two
+    loops."""
+    inside = set(faces)
+    uses = {}
+    for f in faces:
+        for e in g.fe[f]:
+            uses[e] = uses.get(e, 0) + 1
+    rim = [e for e, c in uses.items() if c == 1]
+    parent = {}
+
+    def root(a):
+        while parent.setdefault(a, a) != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for e in rim:                               # boundary loops: the rim's edges joined at shared vertices
+        a, b = root(g.ev[e][0]), root(g.ev[e][1])
+        parent[a] = b
+    loop = {e: root(g.ev[e][0]) for e in rim}
+    if len(set(loop.values())) < 2:
+        return None
+    first = next(iter(loop.values()))
+    touch = {f: {loop[e] for e in g.fe[f] if e in loop} for f in faces}
+    sources = [f for f in faces if first in touch[f]]
+    back = dict.fromkeys(sources)
+    q = deque(sources)
+    while q:
+        a = q.popleft()
+        if touch[a] - {first}:                  # reached another loop: the strip back to the first
+            strip = [a]
+            while back[strip[-1]] is not None:
+                strip.append(back[strip[-1]])
+            break
+        for b in nb[a]:
+            if b in inside and b not in back:
+                back[b] = a
+                q.append(b)
+    return _grow(strip[::-1], inside, nb)
+
+
+def _prefix_euler(order, tri, fe):
+    """``V - E + F`` of every prefix ``order[:c]``, ``c = 0..n``, adding one face at a time."""
+    verts, edges = set(), set()
+    out = [0]
+    for f in order:
+        nv = sum(1 for v in tri[f] if v not in verts)
+        ne = sum(1 for e in fe[f] if e not in edges)
+        verts.update(tri[f])
+        edges.update(fe[f])
+        out.append(out[-1] + nv - ne + 1)
+    return out
+
+
+def _suffix_components(order, nb):
+    """Components (through shared edges) of every suffix ``order[c:]``, ``c = 0..n``: a union-find fed backwards."""
+    parent = {}
+
+    def root(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    out = [0]
+    for f in reversed(order):
+        parent[f] = f
+        count = out[-1] + 1
+        for g in nb[f]:
+            if g in parent:
+                ra, rb = root(f), root(g)
+                if ra != rb:
+                    parent[ra] = rb
+                    count -= 1
+        out.append(count)
+    return out[::-1]
+
+
+def _scan(order, nb, g):
+    """``(order, chi of each prefix, chi of each suffix, components of each suffix)``, indexed by the cut."""
+    return (order, _prefix_euler(order, g.tri, g.fe), _prefix_euler(order[::-1], g.tri, g.fe)[::-1],
+            _suffix_components(order, nb))
+
+
+def _split(faces, nb, cap, g):
     """Two neighbouring halves of ``faces``, neither over ``cap`` faces (see the module docstring)."""
     inside = set(faces)
     n = len(faces)
@@ -189,11 +320,20 @@ def _split(faces, nb, cap):
         faces = [f for c in comps for f in c]
         return faces[:k], faces[k:]
     far = _bfs(faces[0], inside, nb)[-1]        # a peripheral face
+    cuts = sorted(range(max(n - cap, 1), min(cap, n - 1) + 1), key=lambda c: (abs(c - k), c))[:SPLIT_TRIES]
+    scans = [_scan(_grow([far], inside, nb), nb, g)]
+    if scans[0][1][n] != 1:                     # a non-disc cluster: also grown from a strip between two loops
+        across = _across(faces, nb, g)
+        scans += [_scan(across, nb, g)] if across is not None else []
+    for o, pre, suf, parts in scans:            # both halves discs
+        for cut in cuts:
+            if parts[cut] == 1 and pre[cut] == 1 and suf[cut] == 1:
+                return o[:cut], o[cut:]
+    for o, pre, suf, parts in scans:            # both halves connected
+        for cut in cuts:
+            if parts[cut] == 1:
+                return o[:cut], o[cut:]
     order = _bfs(far, inside, nb)
-    cuts = sorted(range(max(n - cap, 1), min(cap, n - 1) + 1), key=lambda c: (abs(c - k), c))
-    for cut in cuts[:SPLIT_TRIES]:
-        if len(_components(order[cut:], nb)) == 1:
-            return order[:cut], order[cut:]
     a, rest = order[:k], order[k:]
     comps = _components(rest, nb)
     merged = a + [f for c in comps[1:] for f in c]
@@ -207,7 +347,9 @@ def cluster_tree(mesh, size):
     members)``; node 0 is the root, ``members[j]`` lists the faces of node ``j``. A node at depth ``d`` owns
     ``size^2 / 2^d`` texels (:func:`pack`), so no split gives a child more faces than that."""
     nb = face_adjacency(mesh)
-    T = len(mesh.faces)
+    tri, fe, ev = _face_edges(mesh, True)
+    T = len(tri)
+    mesh_edges = _Edges(tri.tolist(), fe.tolist(), ev.tolist())
     children, leaf, members = [], [], []
 
     def add(faces):
@@ -221,7 +363,7 @@ def cluster_tree(mesh, size):
         j, depth = stack.pop()
         if len(members[j]) == 1:
             continue
-        a, b = _split(members[j], nb, (size * size) >> (depth + 1))
+        a, b = _split(members[j], nb, (size * size) >> (depth + 1), mesh_edges)
         ca, cb = add(a), add(b)
         children[j] = [ca, cb]
         stack += [(cb, depth + 1), (ca, depth + 1)]
@@ -295,6 +437,13 @@ def build(mesh, size):
     rects = pack(size, children, members)
     pos, nrm, area, face, uv, face_rect = texel_geometry(mesh, size, rects, leaf)
     nb = face_adjacency(mesh)
-    disconnected = sum(1 for m in members if len(m) > 1 and len(_components(m, nb)) > 1)
+    tri, fe = _face_edges(mesh)
+    disconnected = not_disc = 0
+    for m in members:
+        if len(m) > 1:
+            if len(_components(m, nb)) > 1:
+                disconnected += 1
+            elif len(np.unique(tri[m])) - len(np.unique(fe[m])) + len(m) != 1:   # V - E + F
+                not_disc += 1
     return Atlas(size, int(np.log2(size)) + 1, pos, nrm, area, face, rects, children, leaf, uv, face_rect,
-                 disconnected)
+                 disconnected, not_disc)
