@@ -42,8 +42,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from harness.errors import InputError
 
@@ -101,8 +99,7 @@ class Topology:
 def topology(faces, tri):
     """The :class:`Topology` of the faces ``faces`` of a mesh whose welded corners are ``tri`` (:func:`welded_faces`).
 
-    Counted from the set alone (scipy's connected components over its shared and boundary edges), not from
-    :func:`face_adjacency`."""
+    Counted from the set alone (labels over its shared and boundary edges), not from :func:`face_adjacency`."""
     t = np.asarray(tri)[np.asarray(faces, np.int64)]
     n = len(t)
     if n == 0:
@@ -112,8 +109,15 @@ def topology(faces, tri):
     inv = inv.reshape(-1)
     euler = len(np.unique(t)) - len(keys) + n
 
-    def pieces(a, b, m):
-        return connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)[0]
+    def pieces(a, b, m):                    # connected pieces of a graph: labels lowered to a fixed point
+        lab = np.arange(m)
+        while True:
+            old = lab.copy()
+            np.minimum.at(lab, a, lab[b])
+            np.minimum.at(lab, b, lab[a])
+            lab = lab[lab]
+            if np.array_equal(lab, old):
+                return len(np.unique(lab))
 
     owner = np.repeat(np.arange(n), 3)
     order = np.argsort(inv, kind="stable")
