@@ -3,13 +3,17 @@
 :func:`build` turns a mesh into an :class:`Atlas` of ``size x size`` texels (``size`` a power of two):
 
 1. **Binary face clustering** (:func:`cluster_tree`). The root is the whole mesh; each node is split
-   into two neighbouring clusters of ``ceil(n/2)`` and ``floor(n/2)`` faces: a breadth-first growth over
-   the face adjacency (shared, welded edges) from a peripheral face, so the grown half is connected;
-   where the remainder falls apart, the split point in breadth-first order is moved (at most
-   :data:`SPLIT_TRIES` tries, never giving a child more faces than its rectangle's texels) until it
-   is connected, else the remainder's smaller pieces join the grown half when the texels allow, else
-   the balanced split is kept with the remainder in pieces. Leaves are single triangles: ``2T - 1``
-   nodes.
+   into two neighbouring clusters, each face set measured by :func:`topology` (components through shared
+   edges, Euler characteristic ``V - E + F``, boundary loops; a disc is one component with ``V - E + F = 1``).
+   A connected cluster is ordered by growing a region from a peripheral face, next always the face with the
+   most neighbours already taken (:func:`_grow`: every prefix is connected and the front leaves few faces
+   hemmed in); a cluster that is not a disc is also ordered from a shortest strip of faces between two of
+   its boundary loops (an annulus halved across the strip gives two discs). Of the :data:`SPLIT_TRIES` cut
+   points nearest ``ceil(n/2)`` (never giving a child more faces than its rectangle's texels), the first
+   where both halves are discs is taken, else the first where the remainder is connected, else the
+   remainder's smaller pieces join the grown half when the texels allow, else the balanced split is kept
+   with the remainder in pieces. A disconnected cluster is split into whole components. Leaves are single
+   triangles: ``2T - 1`` nodes.
 2. **Packing** (:func:`pack`). The root owns the whole square; a node's rectangle (square or 2:1) is
    halved for its two children (a square across x into two 2:1 rectangles, a 2:1 rectangle across its
    long side into two squares). The face clusters at even depth are therefore the squares of a
@@ -28,8 +32,13 @@ Limits
 ------
 * A leaf's rectangle takes its whole triangle; the upper half of each rectangle is gutter, so about
   half the texels are patches (the MMA pairs triangles instead).
-* Clusters are connected in the face adjacency when the split allows (``Atlas.disconnected`` counts
-  those that are not); "simply connected" (no holes) is not enforced.
+* Disc clusters are preferred, not guaranteed. ``Atlas.not_disc`` counts the connected clusters that are not
+  discs, ``Atlas.disconnected`` the others. A closed mesh is never a disc (``V - E + F = 2 - 2g``), so the
+  root is always counted; and a closed mesh of genus ``g >= 1`` (a torus) cannot be halved into two discs:
+  for halves ``A``, ``B``, ``chi(M) = chi(A) + chi(B) - chi(A n B)``, and with ``A`` a disc ``A n B`` is its
+  one boundary loop (``chi = 0``), so two discs give ``chi(M) = 2``, a sphere. At least one child of a
+  torus's root is therefore not a disc. Deeper down, where a rectangle's texels leave only cut points that
+  split a small cluster into pieces, a cluster is disconnected.
 * Refused (one line, :class:`harness.errors.InputError`): more triangles than texels, a mesh with an
   edge shared by more than two triangles (non-manifold), a clustering whose subtrees outgrow their
   rectangles (fix: a larger ``--atlas-size``).
@@ -48,7 +57,7 @@ from harness.errors import InputError
 __all__ = ["Atlas", "Topology", "build", "cluster_tree", "pack", "texel_geometry", "face_adjacency", "topology",
            "welded_faces", "SPLIT_TRIES"]
 
-#: Split points tried in breadth-first order (nearest the middle first) before the remainder's pieces are merged.
+#: Cut points tried in each order (nearest the middle first) for two discs, then for a connected remainder.
 SPLIT_TRIES = 16
 
 
