@@ -5,12 +5,14 @@
 1. **Binary face clustering** (:func:`cluster_tree`). The root is the whole mesh; each node is split
    into two neighbouring clusters, each face set measured by :func:`topology` (components through shared
    edges, Euler characteristic ``V - E + F``, boundary loops; a disc is one component with ``V - E + F = 1``).
-   A connected cluster is ordered by growing a region from a peripheral face, next always the face with the
-   most neighbours already taken (:func:`_grow`: every prefix is connected and the front leaves few faces
-   hemmed in); a cluster that is not a disc is also ordered from a shortest strip of faces between two of
-   its boundary loops (an annulus halved across the strip gives two discs). Of the :data:`SPLIT_TRIES` cut
-   points nearest ``ceil(n/2)`` (never giving a child more faces than its rectangle's texels), the first
-   where both halves are discs is taken, else the first where the remainder is connected, else the
+   A connected cluster's faces are ordered breadth-first from a peripheral face (every prefix connected); of
+   the :data:`SPLIT_TRIES` cut points nearest ``ceil(n/2)`` (never giving a child more faces than its
+   rectangle's texels), the first where both halves are discs is taken. Failing that, the same cuts of two
+   more orders: a region grown from the peripheral face, next always the face with the fewest neighbours left
+   untaken (:func:`_grow`: a face hemmed in, or a tooth of the rim, is taken at once rather than cut off), and,
+   for a cluster that is not a disc, one grown from a shortest strip of faces between two of its boundary
+   loops (an annulus halved across the strip gives two discs). Failing those, the first cut where the
+   breadth-first remainder is connected, else the
    remainder's smaller pieces join the grown half when the texels allow, else the balanced split is kept
    with the remainder in pieces. A disconnected cluster is split into whole components. Leaves are single
    triangles: ``2T - 1`` nodes.
@@ -180,29 +182,30 @@ def _bfs(start, inside, nb):
 
 
 def _grow(sources, inside, nb):
-    """All of ``inside`` in the order a region grows from ``sources``: next the face with the most neighbours
-    already taken (a face hemmed in on all three sides comes first), then the earliest reached. Every prefix is
-    connected, and the front leaves fewer single faces behind than a breadth-first one."""
+    """All of ``inside`` in the order a region grows from ``sources``: next the face with the fewest neighbours in
+    ``inside`` not yet taken (a face hemmed in, or a tooth of the cluster's rim, comes first), then the earliest
+    reached. Every prefix is connected, and the front leaves fewer faces cut off behind than a breadth-first one."""
     taken = set(sources)
     out = list(sources)
-    count, heap, seq = {}, [], 0
-    for a in out:
+    free, heap, seq = {}, [], 0                 # free: a reached face's neighbours in inside not yet taken
+
+    def reach(a):
+        nonlocal seq
         for b in nb[a]:
             if b in inside and b not in taken:
-                count[b] = count.get(b, 0) + 1
-                heapq.heappush(heap, (-count[b], seq, b))
+                free[b] = free.get(b, sum(1 for c in nb[b] if c in inside)) - 1
+                heapq.heappush(heap, (free[b], seq, b))
                 seq += 1
+
+    for a in out:
+        reach(a)
     while heap:
         c, _, a = heapq.heappop(heap)
-        if a in taken or -c != count[a]:          # taken already, or a stale entry
+        if a in taken or c != free[a]:            # taken already, or a stale entry
             continue
         taken.add(a)
         out.append(a)
-        for b in nb[a]:
-            if b in inside and b not in taken:
-                count[b] = count.get(b, 0) + 1
-                heapq.heappush(heap, (-count[b], seq, b))
-                seq += 1
+        reach(a)
     return out
 
 
@@ -334,14 +337,21 @@ def _split(faces, nb, cap, g):
         return faces[:k], faces[k:]
     far = _bfs(faces[0], inside, nb)[-1]        # a peripheral face
     cuts = sorted(range(max(n - cap, 1), min(cap, n - 1) + 1), key=lambda c: (abs(c - k), c))[:SPLIT_TRIES]
-    scans = [_scan(_grow([far], inside, nb), nb, g)]
-    if scans[0][1][n] != 1:                     # a non-disc cluster: also grown from a strip between two loops
-        across = _across(faces, nb, g)
-        scans += [_scan(across, nb, g)] if across is not None else []
-    for o, pre, suf, parts in scans:            # both halves discs
+    scans = [_scan(_bfs(far, inside, nb), nb, g)]
+    for more in range(3):                       # both halves discs
+        o, pre, suf, parts = scans[-1]
         for cut in cuts:
             if parts[cut] == 1 and pre[cut] == 1 and suf[cut] == 1:
                 return o[:cut], o[cut:]
+        if more == 0:                           # grown by most taken neighbours
+            scans.append(_scan(_grow([far], inside, nb), nb, g))
+        elif more == 1 and pre[n] != 1:         # a non-disc cluster: grown from a strip between two loops
+            across = _across(faces, nb, g)
+            if across is None:
+                break
+            scans.append(_scan(across, nb, g))
+        else:
+            break
     for o, pre, suf, parts in scans:            # both halves connected
         for cut in cuts:
             if parts[cut] == 1:
