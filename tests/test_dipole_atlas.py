@@ -2,8 +2,9 @@
 
 * the multiresolution meshed atlas: a binary tree of ``2T - 1`` clusters, children partitioning their
   parent, rectangles halved (square / 2:1) down to one per triangle and tiling the atlas, every MIP
-  block of a square cluster exactly that cluster's texels; per-triangle texels inside their triangle,
-  areas summing to the triangle's;
+  block of a square cluster exactly that cluster's texels; the topology measure (components, ``V - E + F``,
+  boundary loops) on known face sets; disc clusters wherever the genus allows; per-triangle texels inside
+  their triangle, areas summing to the triangle's;
 * the links: the Barnes-Hut throughput against the exact sum of Eq. (10); the vectorised priority queue
   against a sequential ``heapq`` one; an adaptive texel's links tile the surface;
 * GL against the twin pass by pass (radiosity map, every MIP level, the scattered irradiance map, the
