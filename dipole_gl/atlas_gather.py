@@ -193,7 +193,7 @@ def render(renderer, scene, kernel, params, mat, views, shadow_tex, centre, radi
     work.update(irradiance=at.texels * L, mipmap=at.texels // 3, gather=int(lk.count.sum()), shading=W * H)
     info.update(atlas_size=N, texels=at.texels, patches=int((at.area > 0).sum()), link_slots=lk.slots,
                 links_per_texel=float(lk.count.mean()), adaptive=lk.adaptive, dispatches=dispatches,
-                disconnected_clusters=at.disconnected)
+                disconnected_clusters=at.disconnected, not_disc_clusters=at.not_disc)
     if dbg is not None:
         dbg.update(atlas=at, links=lk, flux=flux, fragments=frag,
                    radiosity=[read_level(data.radiosity, N >> lv, lv) for lv in range(at.levels)],

@@ -2,8 +2,9 @@
 
 * the multiresolution meshed atlas: a binary tree of ``2T - 1`` clusters, children partitioning their
   parent, rectangles halved (square / 2:1) down to one per triangle and tiling the atlas, every MIP
-  block of a square cluster exactly that cluster's texels; per-triangle texels inside their triangle,
-  areas summing to the triangle's;
+  block of a square cluster exactly that cluster's texels; the topology measure (components, ``V - E + F``,
+  boundary loops) on known face sets; disc clusters wherever the genus allows; per-triangle texels inside
+  their triangle, areas summing to the triangle's;
 * the links: the Barnes-Hut throughput against the exact sum of Eq. (10); the vectorised priority queue
   against a sequential ``heapq`` one; an adaptive texel's links tile the surface;
 * GL against the twin pass by pass (radiosity map, every MIP level, the scattered irradiance map, the
@@ -68,6 +69,71 @@ def test_clusters_are_a_quadtree_of_halved_rectangles(name, size):
     print(f"{name}: {T} triangles, {connected / len(children):.3f} of the clusters connected "
           f"({at.disconnected} not)")
     assert connected / len(children) > 0.95
+
+
+def _grid(m, n, wrap_u=False, wrap_v=False):
+    """An ``m x n`` grid of quads, two triangles each, as welded corners; wrapped in u and/or v (an annulus, a torus)."""
+    M, N = m + (not wrap_u), n + (not wrap_v)
+    vid = lambda i, j: (i % M) * N + (j % N)          # noqa: E731
+    tri = []
+    for i in range(m):
+        for j in range(n):
+            a, b, c, d = vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1)
+            tri += [[a, b, c], [a, c, d]]
+    return np.array(tri)
+
+
+def _octahedron():
+    return np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+
+
+@pytest.mark.parametrize("case,faces,want", [
+    ("one triangle", lambda: (_grid(1, 1), [0]), (1, 1, 1)),
+    ("a strip", lambda: (_grid(1, 6), range(12)), (1, 1, 1)),
+    ("two apart", lambda: (_grid(1, 6), [0, 11]), (2, 2, 2)),
+    ("an annulus", lambda: (_grid(3, 8, wrap_v=True), range(48)), (1, 0, 2)),
+    ("a torus", lambda: (_grid(6, 8, wrap_u=True, wrap_v=True), range(96)), (1, 0, 0)),
+    ("a torus minus a face", lambda: (_grid(6, 8, wrap_u=True, wrap_v=True), range(1, 96)), (1, -1, 1)),
+    ("a closed octahedron", lambda: (_octahedron(), range(8)), (1, 2, 0)),
+    ("an octahedron minus a face", lambda: (_octahedron(), range(1, 8)), (1, 1, 1)),
+    ("a strip pinched at a vertex (one boundary, not a disc)", lambda: (_grid(1, 4, wrap_v=True), range(7)), (1, 0, 1)),
+])
+def test_topology_of_known_face_sets(case, faces, want):
+    tri, f = faces()
+    t = atlas_mod.topology(list(f), tri)
+    assert (t.components, t.euler, t.boundary_loops) == want, case
+    assert t.disc == (want[:2] == (1, 1))
+
+
+def test_topology_of_suite_meshes():
+    for name, chi in (("apple_sphere", 2), ("thin_ring", 0)):
+        tri = atlas_mod.welded_faces(load_scene(name).mesh)
+        T = len(tri)
+        assert atlas_mod.topology(range(T), tri) == atlas_mod.Topology(1, chi, 0), name
+        assert atlas_mod.topology(range(1, T), tri) == atlas_mod.Topology(1, chi - 1, 1), name
+
+
+@pytest.mark.parametrize("name,size,not_disc", [("apple_sphere", 256, 1), ("thin_ring", 128, 3)])
+def test_clusters_are_discs(name, size, not_disc):
+    """Every connected cluster is a disc but the root and, on a torus, the depth-1 clusters: a closed surface of
+    genus g splits into discs A, B only if ``chi(M) = chi(A) + chi(B) - chi(A n B) = 2`` (``A n B`` the one loop of
+    ``A``'s boundary, ``chi = 0``), so no split of a torus (``chi = 0``) gives two discs. On the sphere at 256 texels
+    per side every cluster is connected."""
+    mesh = load_scene(name).mesh
+    tri = atlas_mod.welded_faces(mesh)
+    children, _, members = atlas_mod.cluster_tree(mesh, size)
+    depth = np.zeros(len(children), int)
+    for j, (a, b) in enumerate(children):
+        if a >= 0:
+            depth[a] = depth[b] = depth[j] + 1
+    kinds = {j: atlas_mod.topology(m, tri) for j, m in enumerate(members) if len(m) > 1}
+    bad = sorted((int(depth[j]), j, t) for j, t in kinds.items() if t.components == 1 and not t.disc)
+    split = sum(t.components > 1 for t in kinds.values())
+    print(f"{name} at {size}: {len(kinds)} clusters of 2 faces or more, {len(bad)} connected but not discs "
+          f"(depths {[d for d, _, _ in bad]}), {split} disconnected")
+    assert len(bad) == not_disc and all(d <= 1 for d, _, _ in bad), bad[:6]
+    assert name != "apple_sphere" or split == 0
+    assert atlas_mod.build(mesh, size).not_disc == not_disc
 
 
 def test_mip_blocks_are_clusters():
