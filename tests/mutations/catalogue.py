@@ -4,9 +4,11 @@ Every entry is an exact edit (``old`` must occur exactly once in ``path``; the r
 refuses to run otherwise, naming the mutation). The first group is the table of errors
 that no test caught before it was written. A survivor is a bug in the tests: fix the
 tests, never drop the mutation. The rivals' planted errors (``dipole_gl``, the kernels'
-independent route) are in :mod:`.catalogue_rivals`.
+independent route) are in :mod:`.catalogue_rivals`, the calibration form's (its per-cell
+terms, file and leave-one-scene-out fit) in :mod:`.catalogue_form`.
 """
 
+from .catalogue_form import FORM
 from .catalogue_rivals import RIVALS
 from .runner import Mutation
 
@@ -519,4 +521,4 @@ MUTATIONS = (
              'if type_name in ("bool", bool, "bool | None"):', 'if type_name in ("bool", bool):',
              ("tests/test_dipole_atlas.py::test_scheme_flags_on_the_command_line",),
              "an optional true/false flag (--adaptive) kept as text, so 'false' reads as true"),
-) + RIVALS
+) + RIVALS + FORM
