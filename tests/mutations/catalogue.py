@@ -413,7 +413,7 @@ MUTATIONS = (
              ("tests/test_boundary_reflect.py::TestGL::test_propagation_matches_twin",),
              "propagate.comp: the reflected part added but the full transfer still crosses (energy created)"),
     Mutation("rdr_cache_key", "boundary", "sslpv_gl/renderer.py",
-             "params.phase_scaling, params.boundary_reflect)", "params.phase_scaling)",
+             "params.phase_scaling, params.boundary_reflect, res.form)", "params.phase_scaling, res.form)",
              ("tests/test_boundary_reflect.py::TestGL::test_dielectric_render_changes",),
              "boundary_reflect missing from the material cache key: a render after the paper's reuses R_dr = 0"),
     Mutation("rdr_outside_unchecked", "input", "sslpv_gl/params.py",
