@@ -91,6 +91,10 @@ SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject
             "boundary_reflect": str}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
+#: A version 3 form's constants: |a0|, |b0| at most this. They are the scales at all terms 0, which no
+#: cell need have (a scene's scales are exp(a0 + a . x)), so SCALE_RANGE does not bound them; this keeps
+#: exp(a0) a normal float.
+CONST_LIMIT = 50.0
 
 
 @dataclass(frozen=True)
@@ -265,9 +269,9 @@ class _File(InputModel):
                 if len(coeffs) != n:
                     raise FieldProblem(("budget", i, name), f"has {len(coeffs)} coefficients, the form has {n} "
                                        f"([{CONST}, {', '.join(self.form.terms)}])", "give one per term")
-                if not SCALE_RANGE[0] <= math.exp(coeffs[0]) <= SCALE_RANGE[1]:
-                    raise FieldProblem(("budget", i, name, 0), f"exp({coeffs[0]:g}) is outside the scale range "
-                                       f"[{SCALE_RANGE[0]:g}, {SCALE_RANGE[1]:g}]", _FIX)
+                if abs(coeffs[0]) > CONST_LIMIT:
+                    raise FieldProblem(("budget", i, name, 0), f"{coeffs[0]:g} is outside [-{CONST_LIMIT:g}, "
+                                       f"{CONST_LIMIT:g}]", _FIX)
                 if not isinstance(b.steps, int) and "ln_extent_per_step" in self.form.terms and \
                         coeffs[1 + self.form.terms.index("ln_extent_per_step")] != 0.0:
                     raise FieldProblem(("budget", i, name), f"uses ln_extent_per_step, which steps = {b.steps} does "

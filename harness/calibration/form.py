@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.calibration.form_fit import fit_form
+from harness.calibration.form_fit import fit_form, predictive_power
 from harness.calibration.run import ENERGY_TARGET, _figures, _reference
 from harness.calibration.scan import budget_label
 from harness.errors import InputError
@@ -197,7 +197,10 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         X = {n: [scene_terms(scenes[n], N, k, settings)[t] for t in terms] for n in names}
         ln_s = {n: math.log(res["oracle"][n]["s"]) for n in names}
         ln_r = {n: math.log(res["oracle"][n]["r"]) for n in names}
-        fits[label] = {"terms": terms, "X": X,
+        lam = fold_fits(names, X, ln_s, ln_r, None)["lam"]
+        power = {key: predictive_power([X[n] for n in names], [y[n] for n in names], lam)
+                 for key, y in (("ln_s", ln_s), ("ln_r", ln_r))}
+        fits[label] = {"terms": terms, "X": X, "power": power,
                        "folds": {held: fold_fits(names, X, ln_s, ln_r, held,
                                                  fold_anchor(res, held) if anchored else None)
                                  for held in [None, *names]}}
@@ -243,7 +246,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
             "N": N, "steps": k, "terms": list(f["terms"]),
             "coefficients": {key: f["folds"][None][key] for key in ("sigma", "radiance", "lam")},
             "folds": {n: {key: f["folds"][n][key] for key in ("sigma", "radiance", "lam")} for n in names},
-            "scene_terms": f["X"],
+            "scene_terms": f["X"], "predictive_power": f["power"],
             "in_sample": {n: figs["in_sample"].get(label, {}).get(n, {"relmse": None, "energy_ratio": None})
                           for n in names},
             "held_out": held,

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LAMBDAS", "ridge", "choose_lambda", "fit_form", "predict"]
+__all__ = ["LAMBDAS", "ridge", "choose_lambda", "fit_form", "predict", "predictive_power"]
 
 #: The ridge penalties (F5) that leave-one-out chooses from.
 LAMBDAS = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
@@ -65,6 +65,14 @@ def _loo_error(X, y, lam):
         a0, a = ridge(X[keep], y[keep], lam)
         err += float((predict(a0, a, X[i:i + 1])[0] - y[i]) ** 2)
     return err / len(y)
+
+
+def predictive_power(X, y, lam):
+    """How well the terms predict a target: ``{"sd", "loo_rmse"}``, the targets' standard deviation and the
+    root mean square leave-one-out error of (F5) at ``lam`` (a ``loo_rmse`` near ``sd`` predicts nothing
+    beyond the mean). A diagnostic of the regression; no held-out figure comes from it."""
+    X, y = np.asarray(X, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    return {"sd": float(y.std()), "loo_rmse": float(np.sqrt(_loo_error(X, y, lam)))}
 
 
 def choose_lambda(X, Ys, lambdas=LAMBDAS):
