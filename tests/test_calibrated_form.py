@@ -175,6 +175,13 @@ class TestFile:
         msg = str(exc.value)
         assert "\n" not in msg and msg.startswith(f"{p}: {field}: ") and problem in msg and "; " in msg, msg
 
+    def test_other_settings_are_refused(self, tmp_path):
+        from sslpv_gl.params import SSLPVParams
+
+        p = write_v3(tmp_path / "f.toml", [(32, 8, SIGMA, RADIANCE)])
+        with pytest.raises(InputError, match=r"^--skip: skip: .*was calibrated with skip=2.*; pass --skip 2"):
+            SSLPVParams(N=32, steps=8, mapping=f"calibrated:{p}", **(SETTINGS | {"skip": 0}))
+
     def test_other_grid_is_refused(self, tmp_path):
         from sslpv_gl.params import SSLPVParams
 
