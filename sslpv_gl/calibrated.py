@@ -92,9 +92,10 @@ SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 #: A version 3 form's constants: |a0|, |b0| at most this. They are the scales at all terms 0, which no
-#: cell need have (a scene's scales are exp(a0 + a . x)), so SCALE_RANGE does not bound them; this keeps
-#: exp(a0) a normal float.
-CONST_LIMIT = 50.0
+#: cell need have (a scene's scales are exp(a0 + a . x), and mean terms of -5 with slopes of 10 are
+#: ordinary), so SCALE_RANGE does not bound them; this keeps exp(a0) and its products with the
+#: per-cell factors normal float64 numbers (exp(300) ~ 1e130).
+CONST_LIMIT = 300.0
 
 
 @dataclass(frozen=True)

@@ -164,7 +164,7 @@ class TestFile:
         (("[0.3, -0.4", "[nan, -0.4"), "budget[0].sigma_form[0]", "finite"),
         (("[0.3, -0.4", "[0.3, inf"), "budget[0].sigma_form[1]", "finite"),
         (("version = 3", "version = 2"), "form", "is not part of version 2"),
-        (("[0.3, -0.4", "[60.0, -0.4"), "budget[0].sigma_form[0]", "60 is outside [-50, 50]"),
+        (("[0.3, -0.4", "[400.0, -0.4"), "budget[0].sigma_form[0]", "400 is outside [-300, 300]"),
         (('steps = 8', 'steps = "steady"'), "budget[0].sigma_form", "uses ln_extent_per_step"),
     ])
     def test_bad_file_is_one_line(self, tmp_path, edit, field, problem):
