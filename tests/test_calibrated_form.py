@@ -247,3 +247,47 @@ class TestBadInputCommandLine:
             p.write_text(p.read_text().replace(*edit, 1))
         cli(["render", "thin_ring", "--out", "o", "--grid", grid, "--steps", "8", "--skip", "2",
              "--mapping", f"calibrated:{p}"], *needles)
+
+
+class TestCommittedForm:
+    """The committed form's figures are single renders through ``--mapping calibrated:FILE``: in-sample with the
+    committed file, held out with a file rebuilt from the fold's coefficients in calibration.json, measured with
+    ``harness.metrics`` (never the fit's own code), on one of its scenes at every budget (about a minute: the
+    steady solve at N = 32)."""
+
+    FOLDER = "baselines/calibrated/collision_form"
+
+    @pytest.mark.gl
+    @pytest.mark.slow
+    def test_in_sample_and_held_out_figures_are_single_renders(self, tmp_path):
+        import json
+        from pathlib import Path
+
+        from harness.metrics import compute
+        from harness.regression.accuracy import load_case_reference, small_scene
+        from sslpv_gl.params import SSLPVParams
+        from sslpv_gl.renderer import SSLPVRenderer
+
+        folder = Path(__file__).resolve().parent.parent / self.FOLDER
+        info = json.loads((folder / "calibration.json").read_text())
+        cal = load_calibrated(folder / "calibrated.toml", tuple(MAPPINGS))
+        renderer = SSLPVRenderer()
+        for name in ("thin_ring",):
+            rows = []
+            for b in cal.budgets:
+                res = info["results"][f"N={b.N} steps={b.steps}"]
+                fold = res["folds"][name]
+                rows.append((b.N, b.steps, res["terms"], fold["sigma"], fold["radiance"]))
+            held = tmp_path / f"{name}.toml"
+            held.write_text(form_toml(cal.family, cal.settings, rows, {"held_out": name}))
+            scene = small_scene(name)
+            ref, _ = load_case_reference(scene)
+            for b in cal.budgets:
+                res = info["results"][f"N={b.N} steps={b.steps}"]
+                for path, want in ((folder / "calibrated.toml", res["in_sample"][name]), (held, res["held_out"][name])):
+                    img = renderer.render(scene, SSLPVParams(N=b.N, steps=b.steps, mapping=f"calibrated:{path}",
+                                                             **cal.settings)).subsurface
+                    rel = compute("relmse", img, ref["subsurface"], ref["mask"]).value
+                    energy = compute("energy_ratio", img, ref["subsurface"], ref["mask"]).value
+                    assert rel == pytest.approx(want["relmse"], rel=1e-5), (name, b.steps, str(path))
+                    assert energy == pytest.approx(want["energy_ratio"], rel=1e-5), (name, b.steps, str(path))
