@@ -1,7 +1,6 @@
 """Print the per-scene tables of a calibration form (``python -m harness.calibration.form --out DIR``) as Markdown.
 
-Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and its source calibration's
-``calibration.json``, and prints, for every budget:
+Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and prints, for every budget:
 
 * per scene, the subsurface energy ratio and relMSE of the form in-sample (fitted on every scene),
   held out (fitted without the scene, rendered with it), the source family's scalar calibration held
@@ -10,7 +9,7 @@ Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and 
   out; median held-out relMSE at most half the best calibrated family's at the budget;
 * the fitted coefficients of (F1) with the ridge penalty (Eq. F5) chosen for them.
 
-It computes nothing: every figure is the form's or its source's own. ``--write`` puts the tables on the
+It computes nothing: every figure is the form's own (the scalar family's as the form's report copied them). ``--write`` puts the tables on the
 page ``docs/benchmarks/calibration_form_<family>.md`` (``benchmarks/page.py``).
 
 Run: ``.venv/bin/python benchmarks/calibration_form.py DIR [--write]``
@@ -41,27 +40,23 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     form = json.loads(path.read_text())
-    src_path = Path(form["source"]) / "calibration.json"
-    if not src_path.is_file():
-        print(f"error: {path}: source: {src_path} not found; give the form's source calibration", file=sys.stderr)
-        return 2
-    src = json.loads(src_path.read_text())
     page = Page(f"calibration_form_{form['family']}",
                 f"The calibration of the {form['family']} family as a form of the material")
     with page.capture(markdown=True):
-        _tables(form, src)
+        _tables(form)
     page.finish(args.write)
     return 0
 
 
-def _tables(form, src):
+def _tables(form):
     print(f"the {form['family']} family's sigma_scale and radiance_scale as a per-cell form of the material "
           f"(sslpv_gl.material_form, Eq. F1) on {len(form['scenes'])} scenes ({form['command']}; "
-          f"{form['renders']} renders, {form['time']['wall_s']:.0f} s); fit: {form['loss']}")
+          f"{form['renders']} renderer calls, a grouped call rendering several step counts; {form['time']['wall_s']:.0f} s); "
+          f"fit: {form['loss']}")
     print()
     rows = []
     for label, r in form["results"].items():
-        s = src["results"][label]
+        s = r["scalar"]
         t = r["targets"]
         print(f"### {label}")
         print()

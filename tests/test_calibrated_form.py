@@ -291,3 +291,36 @@ class TestCommittedForm:
                     energy = compute("energy_ratio", img, ref["subsurface"], ref["mask"]).value
                     assert rel == pytest.approx(want["relmse"], rel=1e-5), (name, b.steps, str(path))
                     assert energy == pytest.approx(want["energy_ratio"], rel=1e-5), (name, b.steps, str(path))
+
+
+class TestSources:
+    """Calibrations of one family at several grids are taken together; anything else is refused in one line."""
+
+    def folder(self, tmp_path, name, family="collision", grid=32, skip=2):
+        import json
+
+        d = tmp_path / name
+        d.mkdir()
+        text = form_toml(family, SETTINGS | {"skip": skip}, [(grid, 8, TERMS, SIGMA, RADIANCE)], {})
+        (d / "calibrated.toml").write_text(text)
+        res = {"oracle": {}, "held_out": {}, "sigma_scale": 1.0, "radiance_scale": 1.0}
+        (d / "calibration.json").write_text(json.dumps({"family": family, "mapping": family, "scenes": ["a", "b"],
+                                                        "budgets": [[grid, 8]], "results": {f"N={grid} steps=8": res}}))
+        return d
+
+    def test_grids_together(self, tmp_path):
+        from harness.calibration.form import _sources
+
+        cal, settings = _sources([self.folder(tmp_path, "a"), self.folder(tmp_path, "b", grid=16)])
+        assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS
+        assert cal["results"]["N=16 steps=8"]["source"] == str(tmp_path / "b")
+
+    @pytest.mark.parametrize("other, field", [({"grid": 32}, "budgets"), ({"family": "diffusion", "grid": 16}, "family"),
+                                              ({"skip": 0, "grid": 16}, "settings")])
+    def test_refused(self, tmp_path, other, field):
+        from harness.calibration.form import _sources
+
+        b = self.folder(tmp_path, "b", **other)
+        with pytest.raises(InputError) as exc:
+            _sources([self.folder(tmp_path, "a"), b])
+        assert str(exc.value).startswith(f"{b / 'calibration.json'}: {field}: ") and "\n" not in str(exc.value)

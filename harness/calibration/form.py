@@ -1,7 +1,8 @@
 """A calibration that depends on the material: fit the form (F1) over the suite, validate it by renders.
 
-``python -m harness.calibration.form --from DIR --out OUT`` reads a calibration of one family
-(``DIR``: ``calibrated.toml`` and ``calibration.json`` of ``sslpv-harness calibrate``) and
+``python -m harness.calibration.form --from DIR... --out OUT`` reads calibrations of one family
+(each ``DIR``: ``calibrated.toml`` and ``calibration.json`` of ``sslpv-harness calibrate``, e.g. one
+per grid; their budgets are taken together) and
 
 1. takes each scene's own optimum ``(s_i, r_i)`` at each budget (the calibration's *oracle*) and
    its scene-level terms of Eq. (F1) (:func:`scene_terms`, the mean over the scene's inside LPV
@@ -155,26 +156,55 @@ def _against(dirs):
     out = {}
     for d in dirs:
         cal = json.loads((Path(d) / "calibration.json").read_text())
-        out[cal["family"]] = {label: res["targets"]["median_held_out_relmse"] for label, res in cal["results"].items()}
+        out.setdefault(cal["family"], {}).update(
+            {label: res["targets"]["median_held_out_relmse"] for label, res in cal["results"].items()})
     return out
 
 
+def _sources(paths):
+    """The calibrations in ``paths`` as one: their budgets together (one family, one set of settings and scenes;
+    a budget in two of them is refused) -> ``(cal, settings)``, ``cal["results"]`` holding every budget."""
+    from sslpv_gl.calibrated import load_calibrated
+    from sslpv_gl.material import MAPPINGS
+
+    merged, settings = None, None
+    for source in map(Path, paths):
+        cal_path = source / "calibration.json"
+        if not cal_path.is_file():
+            raise InputError(cal_path, "file", "does not exist", "give the --out folder of sslpv-harness calibrate")
+        cal = json.loads(cal_path.read_text())
+        these = dict(load_calibrated(source / "calibrated.toml", tuple(MAPPINGS)).settings)
+        if merged is None:
+            merged, settings = dict(cal, budgets=[], results={}), these
+        for key, have, want in (("family", cal["family"], merged["family"]), ("settings", these, settings),
+                                ("scenes", cal["scenes"], merged["scenes"])):
+            if have != want:
+                raise InputError(cal_path, key, f"differs from the first --from calibration's ({have!r} against "
+                                 f"{want!r})", "give calibrations of one family, settings and scenes")
+        for N, k in cal["budgets"]:
+            label = budget_label(int(N), k)
+            if label in merged["results"]:
+                raise InputError(cal_path, "budgets", f"{label} is also in another --from calibration",
+                                 "give each budget once")
+            merged["budgets"].append([int(N), k])
+            merged["results"][label] = cal["results"][label] | {"source": str(source)}
+    return merged, settings
+
+
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print):
-    """Fit, validate and write the form for the calibration in ``source`` (module docstring) -> the report dict."""
+    """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
+    family whose budgets are taken together; module docstring) -> the report dict."""
     from harness.io.atomic import _check_replaceable, atomic_dir
     from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
     from sslpv_gl.material import MAPPINGS
 
     t0 = time.perf_counter()
-    source, out = Path(source), Path(out)
+    sources = [str(p) for p in ([source] if isinstance(source, (str, Path)) else source)]
+    out = Path(out)
     _check_replaceable(out)
-    cal_path = source / "calibration.json"
-    if not cal_path.is_file():
-        raise InputError(cal_path, "file", "does not exist", "give the --out folder of sslpv-harness calibrate")
-    cal = json.loads(cal_path.read_text())
-    mapping = load_calibrated(source / "calibrated.toml", tuple(MAPPINGS))
-    settings = dict(mapping.settings)
+    cal, settings = _sources(sources)
+    cal_path = Path(sources[0]) / "calibration.json"
     names = list(cal["scenes"])
     budgets = [(int(N), k) for N, k in cal["budgets"]]
     scenes, refs = {}, {}
@@ -205,7 +235,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                                                  fold_anchor(res, held) if anchored else None)
                                  for held in [None, *names]}}
 
-    fit_info = {"source": str(source), "loss": "ridge regression (Eq. F5 of harness.calibration.form_fit) of "
+    fit_info = {"sources": sources, "loss": "ridge regression (Eq. F5 of harness.calibration.form_fit) of "
                 "ln s and ln r on the per-scene oracle of the source calibration" + (
                     ", level anchored to its scalar fit on the same scenes (Eq. F6)" if anchored else ""),
                 "anchored": anchored, "scenes": names,
@@ -252,12 +282,15 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
             "held_out": held,
             "oracle": {n: {key: src["oracle"][n][key] for key in ("relmse", "energy_ratio", "s", "r", "at_bound")}
                        for n in names},
-            "compared": src["compared"],
+            "compared": src["compared"], "source": src["source"],
+            "scalar": {"sigma_scale": src["sigma_scale"], "radiance_scale": src["radiance_scale"],
+                       "held_out": {n: {key: src["held_out"][n][key] for key in ("relmse", "energy_ratio", "s", "r")}
+                                    for n in names}},
             "targets": _targets(held, {fam: med.get(label) for fam, med in best.items()}),
         }
     info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
-            "source": str(source), "anchored": anchored, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
-            "against": {fam: str(d) for fam, d in zip(best, against)}, "results": results, "renders": renders,
+            "sources": sources, "anchored": anchored, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
+            "against": [str(d) for d in against], "results": results, "renders": renders,
             "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
             "created": fit_info["created"], "command": fit_info.get("command")}
     with atomic_dir(out) as tmp:
@@ -287,7 +320,9 @@ def _targets(held, best):
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     ap = argparse.ArgumentParser(prog="python -m harness.calibration.form", description=__doc__.splitlines()[0])
-    ap.add_argument("--from", dest="source", required=True, help="a calibrate --out folder (the oracle and settings)")
+    ap.add_argument("--from", dest="source", nargs="+", required=True,
+                    help="calibrate --out folders of one family (the oracle, the scalar pairs and the settings; their "
+                         "budgets together, e.g. one folder per grid)")
     ap.add_argument("--out", required=True, help="the folder to write (calibrated.toml, calibration.json)")
     ap.add_argument("--against", nargs="*", default=[], help="calibrate --out folders whose held-out medians the "
                     "relMSE target compares with (default: the --from folder)")
@@ -295,7 +330,7 @@ def main(argv=None):
                     "source's scalar pair (Eq. F6)")
     args = ap.parse_args(argv)
     try:
-        info = run_form(args.source, args.out, args.against or [args.source], anchored=not args.free_level, argv=argv,
+        info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level, argv=argv,
                         progress=lambda m: print(m, file=sys.stderr, flush=True))
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
