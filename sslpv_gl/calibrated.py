@@ -139,7 +139,7 @@ class Calibrated:
         if N not in grids:
             raise InputError("--grid", "N", f"{self.path} was fitted for N={', '.join(map(str, grids))}, this render "
                              f"has N={N} (no parameter set for N={N} steps={steps}; it has {have})",
-                             f"render with --grid {grids[0]}, or calibrate at N={N}")
+                             f"render with --grid {' or '.join(map(str, grids))}, or calibrate at N={N}")
         raise InputError(where, "mapping", f"{self.path} has no parameter set for N={N} steps={steps}",
                          f"render at one of its budgets ({have}) or calibrate this one")
 
