@@ -51,6 +51,11 @@ Parameters of :func:`lpv_material`
      - ``"none"``
      - ``"none"`` (the paper) or ``"delta-eddington"`` (:func:`delta_eddington`,
        applied to the resampled medium before the mapping)
+   * - ``form``
+     - ``None``
+     - a :class:`sslpv_gl.material_form.Form`: per-cell factors on ``sigma_lpv`` and on the
+       radiance scale from each cell's dimensionless numbers (Eq. F1 there; a calibrated
+       mapping of version 3)
 
 Mappings
 --------
@@ -121,6 +126,7 @@ import numpy as np
 from harness.errors import InputError
 
 from . import boundary, diffusion
+from .material_form import cell_numbers, extent_cells
 
 __all__ = [
     "MAPPINGS",
@@ -297,7 +303,7 @@ def delta_eddington(sigma_t, albedo, g):
 
 
 def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum", eta=1.0,
-                 sigma_scale=1.0, resampled=None, phase_scaling="none"):
+                 sigma_scale=1.0, resampled=None, phase_scaling="none", form=None):
     """LPV material grids for Sec. 3.2 -> dict of float32 (N, N, N, 3).
 
     Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``),
@@ -311,8 +317,11 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     sets the extrapolation distance of ``extrapolated``; ``sigma_scale``
     multiplies the mapped ``sigma_lpv`` (a calibrated free parameter,
     :mod:`sslpv_gl.calibrated`); ``resampled`` is ``resample_medium(medium, N,
-    resample)`` when the caller already has it; ``phase_scaling`` one of :data:`PHASE_SCALINGS`.
-    Other parameters: the module docstring.
+    resample)`` when the caller already has it; ``phase_scaling`` one of :data:`PHASE_SCALINGS`;
+    ``form`` (a :class:`~sslpv_gl.material_form.Form`) multiplies ``sigma_lpv`` by its per-cell
+    sigma factor and adds ``radiance_factor`` (float64, its per-cell radiance factor, which
+    :func:`sslpv_gl.steps._with_global_scale` folds into ``radiance_scale`` with the budget's
+    scalar one). Other parameters: the module docstring.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
     if phase_scaling not in PHASE_SCALINGS:
@@ -340,6 +349,11 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     sigma_lpv, g = mapped["sigma_lpv"], mapped["g"]
     if sigma_scale != 1.0:
         sigma_lpv = sigma_lpv * float(sigma_scale)
+    radiance_factor = None
+    if form is not None:                             # Eq. (F1) of sslpv_gl.material_form, per cell
+        numbers = cell_numbers(sigma_t, albedo, g_medium, dx, eta, extent_cells(inside_mask, N), form.steps)
+        sigma_factor, radiance_factor = form.factors(numbers)
+        sigma_lpv = sigma_lpv * sigma_factor
     sigma_s_prime = np.clip(mapped["sigma_s_prime"], 0.0, 1.0)
     emit = np.ones_like(sigma_lpv)
     empty = None
@@ -378,4 +392,5 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
         # and empty cells (above)
         "radiance_scale": radiance_scale.astype(np.float32),
         "emit": emit.astype(np.float32),
-    } | ({} if empty is None else {"empty": empty.astype(np.float32)})
+    } | ({} if empty is None else {"empty": empty.astype(np.float32)}) | (
+        {} if radiance_factor is None else {"radiance_factor": radiance_factor})

@@ -36,6 +36,7 @@ class Resolved:
     sigma_scale: float
     radiance_scale: float
     calibration: dict | None = None  # {"path", "sha256", "N", "steps"} for a calibrated mapping
+    form: object = None              # a version 3 file's per-cell part (sslpv_gl.material_form.Form)
 
 
 def _p(default, doc):
@@ -150,7 +151,7 @@ class SSLPVParams:
         cal.check_settings(self)
         b = cal.budget(self.N, self.steps)
         return Resolved(cal.family, b.sigma_scale, b.radiance_scale,
-                        {"path": cal.path, "sha256": cal.sha256, "N": b.N, "steps": b.steps})
+                        {"path": cal.path, "sha256": cal.sha256, "N": b.N, "steps": b.steps}, b.form)
 
     def as_dict(self):
         return dataclasses.asdict(self)

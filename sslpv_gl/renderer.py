@@ -205,7 +205,7 @@ class SSLPVRenderer:
         eta = float(scene.boundary.eta)
         reflect.check(params.boundary_reflect, params.outside, eta)
         key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta,
-               params.phase_scaling, params.boundary_reflect)
+               params.phase_scaling, params.boundary_reflect, res.form)
         mat = self._material_cache.get(key)
         if mat is None:
             med = scene.medium
@@ -219,7 +219,8 @@ class SSLPVRenderer:
                 _put(self._geometry_cache, geo_key, geo, 4)
             inside, resampled = geo
             mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
-                               sigma_scale=res.sigma_scale, resampled=resampled, phase_scaling=params.phase_scaling)
+                               sigma_scale=res.sigma_scale, resampled=resampled, phase_scaling=params.phase_scaling,
+                               form=res.form)
             mat["inside"] = inside
             mat["r_dr"] = reflect.reflectance(params.boundary_reflect, eta)   # 0: the paper (sslpv_gl.reflect)
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.
@@ -417,13 +418,14 @@ def _budgets(params, steps_list, mode):
     """``(resolved, groups)``: each step count's resolved parameters, and the counts grouped by what one
     propagation can serve."""
     # What each step count renders with: a calibrated mapping has its own sigma_scale and
-    # radiance_scale per budget (Resolved). Counts that share the mapping family and
-    # sigma_scale share one propagation; the radiance scale acts after it (grid.scale).
+    # radiance_scale per budget (Resolved), and a version 3 file a per-cell form per budget.
+    # Counts that share the mapping family, sigma_scale and form share one propagation; the
+    # radiance scale acts after it (grid.scale).
     resolved = {k: params.replace(steps=k).resolved() for k in sorted(set(steps_list))} if mode is None \
         else {params.steps: params.resolved()}
     groups = {}
     for k, res in resolved.items():
-        groups.setdefault((res.family, res.sigma_scale), []).append(k)
+        groups.setdefault((res.family, res.sigma_scale, res.form), []).append(k)
     return resolved, groups
 
 

@@ -132,9 +132,13 @@ def propagate_and_shade(renderer, scene, params, ks, resolved, grid, dx, c0, bou
 
 
 def _with_global_scale(material, r):
-    """The material with the resolved global radiance scale ``r`` folded into its per-cell one."""
-    if r == 1.0:
+    """The material with the resolved global radiance scale ``r`` folded into its per-cell one, and with
+    a calibrated form's per-cell ``radiance_factor`` (Eq. F1 of :mod:`sslpv_gl.material_form`)."""
+    factor = material.get("radiance_factor")
+    if r == 1.0 and factor is None:
         return material
     out = dict(material)
     out["radiance_scale"] = np.asarray(material.get("radiance_scale", 1.0), dtype=np.float64) * r
+    if factor is not None:
+        out["radiance_scale"] = out["radiance_scale"] * factor
     return out

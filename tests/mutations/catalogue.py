@@ -4,9 +4,11 @@ Every entry is an exact edit (``old`` must occur exactly once in ``path``; the r
 refuses to run otherwise, naming the mutation). The first group is the table of errors
 that no test caught before it was written. A survivor is a bug in the tests: fix the
 tests, never drop the mutation. The rivals' planted errors (``dipole_gl``, the kernels'
-independent route) are in :mod:`.catalogue_rivals`.
+independent route) are in :mod:`.catalogue_rivals`, the calibration form's (its per-cell
+terms, file and leave-one-scene-out fit) in :mod:`.catalogue_form`.
 """
 
+from .catalogue_form import FORM
 from .catalogue_rivals import RIVALS
 from .runner import Mutation
 
@@ -411,7 +413,7 @@ MUTATIONS = (
              ("tests/test_boundary_reflect.py::TestGL::test_propagation_matches_twin",),
              "propagate.comp: the reflected part added but the full transfer still crosses (energy created)"),
     Mutation("rdr_cache_key", "boundary", "sslpv_gl/renderer.py",
-             "params.phase_scaling, params.boundary_reflect)", "params.phase_scaling)",
+             "params.phase_scaling, params.boundary_reflect, res.form)", "params.phase_scaling, res.form)",
              ("tests/test_boundary_reflect.py::TestGL::test_dielectric_render_changes",),
              "boundary_reflect missing from the material cache key: a render after the paper's reuses R_dr = 0"),
     Mutation("rdr_outside_unchecked", "input", "sslpv_gl/params.py",
@@ -519,4 +521,4 @@ MUTATIONS = (
              'if type_name in ("bool", bool, "bool | None"):', 'if type_name in ("bool", bool):',
              ("tests/test_dipole_atlas.py::test_scheme_flags_on_the_command_line",),
              "an optional true/false flag (--adaptive) kept as text, so 'false' reads as true"),
-) + RIVALS
+) + RIVALS + FORM

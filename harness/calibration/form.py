@@ -1,0 +1,347 @@
+"""A calibration that depends on the material: fit the form (F1) over the suite, validate it by renders.
+
+``python -m harness.calibration.form --from DIR... --out OUT`` reads calibrations of one family
+(each ``DIR``: ``calibrated.toml`` and ``calibration.json`` of ``sslpv-harness calibrate``, e.g. one
+per grid; their budgets are taken together) and
+
+1. takes each scene's own optimum ``(s_i, r_i)`` at each budget (the calibration's *oracle*) and
+   its scene-level terms of Eq. (F1) (:func:`scene_terms`, the mean over the scene's inside LPV
+   cells and colours, :mod:`sslpv_gl.material_form`);
+2. fits the form by ridge regression (Eq. F5, :mod:`harness.calibration.form_fit`) on all
+   scenes (*in-sample*) and, for each scene, on the others alone (*held out*: the penalty too
+   is chosen without it, :func:`fold_fits`);
+3. RENDERS every scene with the in-sample file and each scene with its own held-out file
+   (a version 3 ``calibrated.toml`` each, read by the renderer as ``--mapping calibrated:PATH``
+   would): the reported figures are those renders', never the regression's;
+4. judges them as :mod:`harness.calibration.run` does, beside the scene's oracle and the fixed
+   mappings (both from ``DIR``), and against the held-out median relMSE of every calibrated family
+   given with ``--against``: targets ``energy ratio in [0.8, 1.25]`` held out on every scene and the
+   median held-out relMSE at most :data:`FORM_RELMSE_FACTOR` times the best family's;
+5. writes, atomically, ``OUT/calibrated.toml`` (version 3) and ``OUT/calibration.json``.
+
+``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
+step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
+the render loss (C2) itself (:mod:`harness.calibration.form_fit`); the scene's oracle is the
+family's (one ``(s, r)`` per scene), so the form may beat it on a heterogeneous scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from harness.calibration.form_fit import fit_form, predictive_power
+from harness.calibration.run import ENERGY_TARGET, _figures, _reference
+from harness.calibration.scan import budget_label
+from harness.errors import InputError
+
+__all__ = ["scene_terms", "budget_terms", "fold_fits", "fold_anchor", "form_toml", "run_form", "FORM_RELMSE_FACTOR", "main"]
+
+#: Target: median held-out relMSE at most this times the best calibrated family's at the budget.
+FORM_RELMSE_FACTOR = 0.5
+
+
+def budget_terms(steps):
+    """The terms of (F1) a budget's form uses: all, less ``ln_extent_per_step`` at ``steps = steady``."""
+    from sslpv_gl.material_form import TERMS
+
+    return tuple(t for t in TERMS if isinstance(steps, int) or t != "ln_extent_per_step")
+
+
+def scene_terms(scene, N, steps, settings):
+    """The scene-level terms of (F1) at grid ``N`` and step count ``steps``: each term's mean over the
+    inside cells and colours of the medium as the renderer maps it (same resampling, phase scaling, eta)."""
+    from harness.scene.geometry import grid_inside
+    from sslpv_gl.material import delta_eddington, resample_medium
+    from sslpv_gl.material_form import cell_numbers, extent_cells, mean_numbers
+
+    med = scene.medium
+    inside = grid_inside(scene.mesh, med.bbox_min, med.bbox_max, N)
+    st, a, g = resample_medium(med, N, settings["resample"])
+    if settings.get("phase_scaling", "none") == "delta-eddington":
+        st, a, g = delta_eddington(st, a, g)
+    dx = float(np.asarray(med.bbox_max, np.float64)[0] - np.asarray(med.bbox_min, np.float64)[0]) / N
+    numbers = cell_numbers(st, a, g, dx, float(scene.boundary.eta), extent_cells(inside, N), steps)
+    means = mean_numbers(numbers, inside)
+    return {t: means[t] for t in budget_terms(steps)}
+
+
+def fold_fits(names, X, ln_s, ln_r, held, anchor=None):
+    """Eq. (F5) on every scene but ``held`` (None: on all) -> :func:`~harness.calibration.form_fit.fit_form`'s
+    dict. ``X`` (scene -> term values), ``ln_s`` and ``ln_r`` (scene -> oracle) are read for the training
+    scenes only, so nothing of the held-out scene reaches its fit. ``anchor`` (Eq. F6): the scalar
+    ``(ln s, ln r)`` the source calibration fitted on the same training scenes (its held-out pair of
+    ``held``, its in-sample pair for None), or None for the regression's own level."""
+    train = [n for n in names if n != held]
+    return fit_form([X[n] for n in train], [ln_s[n] for n in train], [ln_r[n] for n in train],
+                    anchor) | {"scenes": train}
+
+
+def fold_anchor(res, held):
+    """Eq. (F6)'s ``(ln s*, ln r*)`` for a fold: the source calibration's scalar pair fitted on the same
+    training scenes, i.e. its held-out pair of ``held`` (fitted without it), or its in-sample pair for None."""
+    pair = (res["sigma_scale"], res["radiance_scale"]) if held is None else \
+        (res["held_out"][held]["s"], res["held_out"][held]["r"])
+    return math.log(pair[0]), math.log(pair[1])
+
+
+def form_toml(family, settings, budgets, fit_info):
+    """A version 3 calibrated mapping file: ``budgets`` is ``[(N, steps, terms, sigma, radiance), ...]``
+    (coefficients ``[const, *terms]``), written against the file's one ``[form]`` term list."""
+    from sslpv_gl.calibrated import FORM_VERSION, FORMAT
+    from sslpv_gl.material_form import TERMS
+
+    def val(v):
+        return json.dumps(v) if isinstance(v, (str, bool, list)) else repr(v)
+
+    lines = ["# Written by python -m harness.calibration.form; use it as --mapping calibrated:PATH.",
+             f'format = "{FORMAT}"', f"version = {FORM_VERSION}", f'family = "{family}"', "",
+             "[settings]   # the renderer settings of the fit: a render must use the same"]
+    lines += [f"{k} = {val(v)}" for k, v in settings.items()]
+    lines += ["", "[fit]"] + [f"{k} = {val(v)}" for k, v in fit_info.items()]
+    lines += ["", "[form]   # ln s = a0 + sum_k a_k x_k, the same for ln r (sslpv_gl.material_form, Eq. F1)",
+              f"terms = {val(list(TERMS))}"]
+    for N, steps, terms, sigma, radiance in budgets:
+        full = {}
+        for name, coeffs in (("sigma_form", sigma), ("radiance_form", radiance)):
+            by_term = dict(zip(terms, coeffs[1:]))
+            full[name] = [float(coeffs[0])] + [float(by_term.get(t, 0.0)) for t in TERMS]
+        lines += ["", "[[budget]]", f"N = {N}", f"steps = {val(steps)}",
+                  f"sigma_form = {val(full['sigma_form'])}", f"radiance_form = {val(full['radiance_form'])}"]
+    return "\n".join(lines) + "\n"
+
+
+def _render(renderer, scene, path, settings, N, steps_list):
+    """``{steps: subsurface image}`` of ``scene`` with the calibrated file ``path`` (integer counts from one
+    grouped call, as the renderer groups them; ``steady`` alone). A failed render is left out."""
+    from sslpv_gl.params import SSLPVParams
+
+    out = {}
+    ints = sorted(k for k in steps_list if isinstance(k, int))
+    base = {k: v for k, v in settings.items()}
+    if ints:
+        params = SSLPVParams(N=N, steps=ints[-1], mapping=f"calibrated:{path}", **base)
+        for k, res in zip(ints, renderer.render_steps(scene, params, ints)):
+            out[k] = np.asarray(res.subsurface, dtype=np.float64)
+    for k in (k for k in steps_list if not isinstance(k, int)):
+        try:
+            out[k] = np.asarray(renderer.render(scene, SSLPVParams(N=N, steps=k, mapping=f"calibrated:{path}",
+                                                                   **base)).subsurface, dtype=np.float64)
+        except (ValueError, FloatingPointError):       # no steady state with these scales
+            pass
+    return out
+
+
+def _judge(images, ref):
+    return {k: _figures(img, ref, 1.0) if np.all(np.isfinite(img)) else {"relmse": None, "energy_ratio": None}
+            for k, img in images.items()}
+
+
+def _median(values):
+    vals = [v for v in values if v is not None]
+    return statistics.median(vals) if vals else None
+
+
+def _against(dirs):
+    """``{family: {budget label: median held-out relMSE}}`` of the calibrations in ``dirs``."""
+    out = {}
+    for d in dirs:
+        cal = json.loads((Path(d) / "calibration.json").read_text())
+        out.setdefault(cal["family"], {}).update(
+            {label: res["targets"]["median_held_out_relmse"] for label, res in cal["results"].items()})
+    return out
+
+
+def _sources(paths):
+    """The calibrations in ``paths`` as one: their budgets together (one family, one set of settings and scenes;
+    a budget in two of them is refused) -> ``(cal, settings)``, ``cal["results"]`` holding every budget."""
+    from sslpv_gl.calibrated import load_calibrated
+    from sslpv_gl.material import MAPPINGS
+
+    merged, settings = None, None
+    for source in map(Path, paths):
+        cal_path = source / "calibration.json"
+        if not cal_path.is_file():
+            raise InputError(cal_path, "file", "does not exist", "give the --out folder of sslpv-harness calibrate")
+        cal = json.loads(cal_path.read_text())
+        these = dict(load_calibrated(source / "calibrated.toml", tuple(MAPPINGS)).settings)
+        if merged is None:
+            merged, settings = dict(cal, budgets=[], results={}), these
+        for key, have, want in (("family", cal["family"], merged["family"]), ("settings", these, settings),
+                                ("scenes", cal["scenes"], merged["scenes"])):
+            if have != want:
+                raise InputError(cal_path, key, f"differs from the first --from calibration's ({have!r} against "
+                                 f"{want!r})", "give calibrations of one family, settings and scenes")
+        for N, k in cal["budgets"]:
+            label = budget_label(int(N), k)
+            if label in merged["results"]:
+                raise InputError(cal_path, "budgets", f"{label} is also in another --from calibration",
+                                 "give each budget once")
+            merged["budgets"].append([int(N), k])
+            merged["results"][label] = cal["results"][label] | {"source": str(source)}
+    return merged, settings
+
+
+def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print):
+    """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
+    family whose budgets are taken together; module docstring) -> the report dict."""
+    from harness.io.atomic import _check_replaceable, atomic_dir
+    from harness.runs.references import load_reference
+    from sslpv_gl.calibrated import load_calibrated
+    from sslpv_gl.material import MAPPINGS
+
+    t0 = time.perf_counter()
+    sources = [str(p) for p in ([source] if isinstance(source, (str, Path)) else source)]
+    out = Path(out)
+    _check_replaceable(out)
+    cal, settings = _sources(sources)
+    cal_path = Path(sources[0]) / "calibration.json"
+    names = list(cal["scenes"])
+    budgets = [(int(N), k) for N, k in cal["budgets"]]
+    scenes, refs = {}, {}
+    for n in names:
+        scene, folder = _reference(n, tuple(cal["sizes"][n]))
+        if scene.content_hash != cal["content_hashes"][n]:
+            raise InputError(cal_path, f"content_hashes.{n}", "the scene changed since this calibration: its "
+                             "oracle no longer holds", f"calibrate the {cal['family']} family again")
+        scenes[n], refs[n] = scene, load_reference(folder, (scene.camera.height, scene.camera.width))
+    if renderer is None:
+        from sslpv_gl.renderer import SSLPVRenderer
+
+        renderer = SSLPVRenderer()
+
+    # 1.-2. terms, oracle, fits (in-sample: held=None)
+    fits = {}
+    for N, k in budgets:
+        label, res = budget_label(N, k), cal["results"][budget_label(N, k)]
+        terms = budget_terms(k)
+        X = {n: [scene_terms(scenes[n], N, k, settings)[t] for t in terms] for n in names}
+        ln_s = {n: math.log(res["oracle"][n]["s"]) for n in names}
+        ln_r = {n: math.log(res["oracle"][n]["r"]) for n in names}
+        lam = fold_fits(names, X, ln_s, ln_r, None)["lam"]
+        power = {key: predictive_power([X[n] for n in names], [y[n] for n in names], lam)
+                 for key, y in (("ln_s", ln_s), ("ln_r", ln_r))}
+        fits[label] = {"terms": terms, "X": X, "power": power,
+                       "folds": {held: fold_fits(names, X, ln_s, ln_r, held,
+                                                 fold_anchor(res, held) if anchored else None)
+                                 for held in [None, *names]}}
+
+    fit_info = {"sources": sources, "loss": "ridge regression (Eq. F5 of harness.calibration.form_fit) of "
+                "ln s and ln r on the per-scene oracle of the source calibration" + (
+                    ", level anchored to its scalar fit on the same scenes (Eq. F6)" if anchored else ""),
+                "anchored": anchored, "scenes": names,
+                "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    if argv:
+        fit_info["command"] = "python -m harness.calibration.form " + " ".join(argv)
+
+    def toml_for(held):
+        rows = [(N, k, fits[budget_label(N, k)]["terms"], fits[budget_label(N, k)]["folds"][held]["sigma"],
+                 fits[budget_label(N, k)]["folds"][held]["radiance"]) for N, k in budgets]
+        return form_toml(cal["mapping"], settings, rows, fit_info | ({"held_out": held} if held else {}))
+
+    # 3. renders: every scene in-sample, each scene with its own held-out file
+    figs = {"in_sample": {}, "held_out": {}}
+    renders = 0
+    with tempfile.TemporaryDirectory(prefix="sslpv-form-") as tmp:
+        for held in [None, *names]:
+            path = Path(tmp) / f"{held or 'all'}.toml"
+            path.write_text(toml_for(held))
+            load_calibrated(path, tuple(MAPPINGS))
+            for n in (names if held is None else [held]):
+                which = "in_sample" if held is None else "held_out"
+                for N in sorted({N for N, _ in budgets}):
+                    imgs = _render(renderer, scenes[n], path, settings, N, [k for M, k in budgets if M == N])
+                    renders += 1 + sum(1 for k in imgs if not isinstance(k, int))
+                    for k, f in _judge(imgs, refs[n]).items():
+                        figs[which].setdefault(budget_label(N, k), {})[n] = f
+                progress(f"rendered {n} with the form fitted on {'all scenes' if held is None else 'the others'}")
+
+    # 4. figures and targets
+    best = _against(against)
+    results = {}
+    for N, k in budgets:
+        label = budget_label(N, k)
+        src, f = cal["results"][label], fits[label]
+        held = {n: figs["held_out"].get(label, {}).get(n, {"relmse": None, "energy_ratio": None}) for n in names}
+        results[label] = {
+            "N": N, "steps": k, "terms": list(f["terms"]),
+            "coefficients": {key: f["folds"][None][key] for key in ("sigma", "radiance", "lam")},
+            "folds": {n: {key: f["folds"][n][key] for key in ("sigma", "radiance", "lam")} for n in names},
+            "scene_terms": f["X"], "predictive_power": f["power"],
+            "in_sample": {n: figs["in_sample"].get(label, {}).get(n, {"relmse": None, "energy_ratio": None})
+                          for n in names},
+            "held_out": held,
+            "oracle": {n: {key: src["oracle"][n][key] for key in ("relmse", "energy_ratio", "s", "r", "at_bound")}
+                       for n in names},
+            "compared": src["compared"], "source": src["source"],
+            "scalar": {"sigma_scale": src["sigma_scale"], "radiance_scale": src["radiance_scale"],
+                       "held_out": {n: {key: src["held_out"][n][key] for key in ("relmse", "energy_ratio", "s", "r")}
+                                    for n in names}},
+            "targets": _targets(held, {fam: med.get(label) for fam, med in best.items()}),
+        }
+    info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
+            "sources": sources, "anchored": anchored, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
+            "against": [str(d) for d in against], "results": results, "renders": renders,
+            "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
+            "created": fit_info["created"], "command": fit_info.get("command")}
+    with atomic_dir(out) as tmp:
+        (tmp / "calibrated.toml").write_text(toml_for(None))
+        load_calibrated(tmp / "calibrated.toml", tuple(MAPPINGS))        # what we write must read back
+        (tmp / "calibration.json").write_text(json.dumps(info, indent=1) + "\n")
+    return info
+
+
+def _targets(held, best):
+    """Energy ratio in range held out on every scene; median held-out relMSE at most FORM_RELMSE_FACTOR x the
+    best calibrated family's (``best``: family -> its median held-out relMSE at this budget)."""
+    lo, hi = ENERGY_TARGET
+    outside = {n: v["energy_ratio"] for n, v in held.items()
+               if v["energy_ratio"] is None or not lo <= v["energy_ratio"] <= hi}
+    med = _median(v["relmse"] for v in held.values())
+    known = {fam: v for fam, v in best.items() if v is not None}
+    best_fam = min(known, key=known.get) if known else None
+    return {"energy_range": list(ENERGY_TARGET), "energy_outside": outside, "energy_met": not outside,
+            "median_held_out_relmse": med, "best_family": best_fam,
+            "best_family_median": known.get(best_fam), "relmse_factor": FORM_RELMSE_FACTOR,
+            "relmse_met": bool(med is not None and best_fam is not None
+                               and med <= FORM_RELMSE_FACTOR * known[best_fam]),
+            "better_than_best": bool(med is not None and best_fam is not None and med < known[best_fam])}
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ap = argparse.ArgumentParser(prog="python -m harness.calibration.form", description=__doc__.splitlines()[0])
+    ap.add_argument("--from", dest="source", nargs="+", required=True,
+                    help="calibrate --out folders of one family (the oracle, the scalar pairs and the settings; their "
+                         "budgets together, e.g. one folder per grid)")
+    ap.add_argument("--out", required=True, help="the folder to write (calibrated.toml, calibration.json)")
+    ap.add_argument("--against", nargs="*", default=[], help="calibrate --out folders whose held-out medians the "
+                    "relMSE target compares with (default: the --from folder)")
+    ap.add_argument("--free-level", action="store_true", help="the regression's own a0 and b0 (Eq. F5), not the "
+                    "source's scalar pair (Eq. F6)")
+    args = ap.parse_args(argv)
+    try:
+        info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level, argv=argv,
+                        progress=lambda m: print(m, file=sys.stderr, flush=True))
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for label, res in info["results"].items():
+        t = res["targets"]
+        print(f"{label}: median held-out relMSE {t['median_held_out_relmse']:.4g} (best family {t['best_family']} "
+              f"{t['best_family_median']:.4g}); energy {'met' if t['energy_met'] else 'NOT met'}, relMSE "
+              f"{'met' if t['relmse_met'] else 'NOT met'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
