@@ -324,3 +324,14 @@ class TestSources:
         with pytest.raises(InputError) as exc:
             _sources([self.folder(tmp_path, "a"), b])
         assert str(exc.value).startswith(f"{b / 'calibration.json'}: {field}: ") and "\n" not in str(exc.value)
+
+
+def test_study_names_a_form_apart_from_its_scalar_family():
+    """The study's tables key a calibrated mapping by its label: a per-cell form and the scalar fit of the same family
+    must not share a column."""
+    from harness.study.spec import study_label
+
+    scalar = study_label("calibrated:baselines/calibrated/collision/calibrated.toml")
+    form = study_label("calibrated:baselines/calibrated/collision_form/calibrated.toml")
+    assert scalar == "calibrated collision" and form == "calibrated collision form"
+    assert study_label("collision") == "collision"

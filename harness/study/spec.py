@@ -72,7 +72,8 @@ class StudyFile(InputModel):
 
 
 def study_label(mapping):
-    """A calibrated mapping's family name for tables (``calibrated diffusion``), else the mapping."""
+    """A calibrated mapping's family name for tables (``calibrated diffusion``; ``calibrated collision form``
+    for a file whose scales are a per-cell form, :mod:`sslpv_gl.material_form`), else the mapping."""
     m = str(mapping)
     if not m.startswith("calibrated:"):
         return m
@@ -80,7 +81,8 @@ def study_label(mapping):
     from sslpv_gl.material import MAPPINGS
 
     try:
-        return f"calibrated {load_calibrated(m.split(':', 1)[1], tuple(MAPPINGS)).family}"
+        cal = load_calibrated(m.split(':', 1)[1], tuple(MAPPINGS))
+        return f"calibrated {cal.family}" + (" form" if any(b.form is not None for b in cal.budgets) else "")
     except InputError:
         return "calibrated " + Path(m.split(":", 1)[1]).parent.name
 

@@ -42,4 +42,8 @@ FORM = (
              "sides.append(int(idx[-1] - idx[0] + 1))", "sides.append(int(idx[-1] - idx[0]))",
              (f"{FT}::TestCellForm::test_extent_is_the_inside_bounding_box",),
              "the object's extent E of Eq. (F4) one cell short"),
+    Mutation("study_form_label_dropped", "cli", "harness/study/spec.py",
+             "+ (\" form\" if any(b.form is not None for b in cal.budgets) else \"\")", "",
+             (f"{FT}::test_study_names_a_form_apart_from_its_scalar_family",),
+             "the study labels a per-cell form as its scalar family: the two share one headline column"),
 )
