@@ -1,4 +1,4 @@
-"""``sslpv-harness study`` end to end on a tiny study (two small scenes, 10 configurations each; once cold and once warm
+"""``sslpv-harness study`` end to end on a tiny study (two small scenes, 12 configurations each; once cold and once warm
 through the sweep), and its bad input.
 
 The end-to-end tests share ONE cold study run and ONE warm rerun (a module fixture, its own result
@@ -43,6 +43,11 @@ steps = ["steady"]
 mapping = ["diffusion"]
 skip = [0]
 [[products]]
+grid = [16]
+steps = [4, 8]
+mapping = ["collision"]
+outside = ["interior"]
+[[products]]
 method = "dipole"
 gather = ["dense"]
 """
@@ -70,7 +75,7 @@ def _one_line(capsys, args, tmp):
     (lambda t: t.replace('title = "tiny study"', 'title = "x"\ncolour = 1'), "colour", "not a known field"),
     (lambda t: t.replace('"thin_ring", "wide_slab"', '"thin_ring", "no_such_scene"'), "scenes[1]",
      "unknown scene 'no_such_scene'"),
-    (lambda t: t.replace('method = "dipole"', 'method = "photon_beams"'), "products[2].method",
+    (lambda t: t.replace('method = "dipole"', 'method = "photon_beams"'), "products[3].method",
      "unknown method 'photon_beams'"),
     (lambda t: t.replace('mapping = ["collision", "diffusion"]', 'mapping = ["collision"]\nwobble = [1]'),
      "products[0].wobble", "not a known field"),
@@ -178,7 +183,7 @@ def test_csv_row_recomputes_with_numpy(runs):
     from harness.study.table import read_csv
 
     rows = read_csv(runs["out"] / "results.csv")
-    assert len(rows) == runs["cold"]["configurations"] == 2 * 10
+    assert len(rows) == runs["cold"]["configurations"] == 2 * 12
     picked = [next(r for r in rows if r["method"] == "sslpv" and r["K"] == "8"),
               next(r for r in rows if r["method"] == "dipole")]
     for row in picked:
@@ -222,10 +227,10 @@ def test_warm_rerun_renders_nothing(runs):
     cold, warm, served = runs["cold"], runs["warm"], runs["served"]
     assert cold["rendered"] == cold["configurations"] and cold["reused"] == 0 and not cold["unchanged"]
     # the same folder, nothing changed: served as it is, nothing rendered or rewritten
-    assert warm["unchanged"] and warm["rendered"] == 0 and warm["reused"] == warm["configurations"] == 20
+    assert warm["unchanged"] and warm["rendered"] == 0 and warm["reused"] == warm["configurations"] == 24
     assert {p: p.stat().st_mtime_ns for p in runs["out"].iterdir()} == runs["mtimes"]
     # a new folder: the sweep serves every configuration from the result cache and measures it again
-    assert not served["unchanged"] and served["rendered"] == 0 and served["reused"] == 20
+    assert not served["unchanged"] and served["rendered"] == 0 and served["reused"] == 24
 
     def metrics(text):
         rows = [dict(r) for r in csv.DictReader(io.StringIO(text))]
@@ -277,6 +282,18 @@ def test_headline_table_and_limits(runs):
             assert f"{r['subsurface_relmse']:.3g} / {r['subsurface_flip']:.3g} / {r['subsurface_energy_ratio']:.3g}" \
                 in body and r["setting"] in body
     assert "built-in method" not in html
+    # the extension family has its own table, against its base, and stays out of the headline
+    ext = runs["built"]["extensions"]
+    assert [f["family"] for f in ext["families"]] == ["collision + interior"]
+    fam = ext["families"][0]
+    for scene in head["scenes"]:
+        c = fam["cells"][scene]
+        rel = {r["setting"]: r["subsurface_relmse"] for r in runs["built"]["rows"] if r["scene"] == scene}
+        assert c["ratio"] == pytest.approx(rel[c["setting"]] / rel[c["base_setting"]])
+        assert c["outcome"] in {"better", "worse", "≈", "mixed", "≈ (better in part)", "≈ (base better in part)"}
+        assert "outside=interior" in c["setting"] and "outside" not in c["base_setting"]
+    assert ext["default_outside"]["outside"] == "interior"
+    assert "The extensions beside the published method" in html and "collision + interior" in html
 
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
@@ -324,6 +341,7 @@ def test_docs_page_from_the_study(runs, tmp_path):
         assert (tmp_path / "docs" / "figures" / f"results_{name}.svg").is_file()
         assert f"figures/results_{name}.png" in text
     assert str(doc) in written
+    assert "## The extensions beside the published method" in text and "\n| collision + interior | collision |" in text
 
 
 def test_a_study_killed_in_its_first_sweep_is_ours(tmp_path, capsys):

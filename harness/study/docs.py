@@ -14,7 +14,7 @@ from pathlib import Path
 
 from harness import paths
 from harness.io.atomic import atomic_write
-from harness.study.present import headline_rows, judging_methods, limit_lines
+from harness.study.present import extension_lines, extension_rows, headline_rows, judging_methods, limit_lines
 
 DOC = paths.REPO / "docs" / "results.md"
 FIGURES = ("pareto", "refine_k", "refine_n")
@@ -79,6 +79,21 @@ def write_docs(built, out, doc=DOC):
             lines.append("")
             lines += [f"* {x}" for x in limit_lines(built["limits"][scene])]
             lines.append("")
+    ext = built.get("extensions")
+    if ext and ext["families"]:
+        lines += ["## The extensions beside the published method", "",
+                  "Options the paper does not have (`docs/diffusion_mapping.md`, Secs. 8-10), each family against "
+                  "its base (the same mapping without them): per scene, the ratio of the best setting's "
+                  f"subsurface {ext['metric']} within the budgets (extension / base) and the paired judgement "
+                  f"(better / worse beyond the reference's noise, ≈ within it; Bonferroni over "
+                  f"{ext['comparisons']} comparisons). Columns: median ratio over the scenes; scenes better / "
+                  "worse / judged.", "",
+                  "| family | base | median | better / worse / scenes | " + " | ".join(ext["scenes"]) + " |",
+                  "|---|---|---|---|" + "---|" * len(ext["scenes"])]
+        for r in extension_rows(ext, metrics):
+            lines.append(f"| {r['family']} | {r['base']} | {r['median']} | {r['counts']} | "
+                         + " | ".join(r["cells"]) + " |")
+        lines += [""] + [f"{x}" for x in extension_lines(ext)] + [""]
     lines += ["## Figures", ""]
     for name in plots:
         lines += [f"![{name}](figures/results_{name}.png) ([SVG](figures/results_{name}.svg))", ""]

@@ -108,3 +108,30 @@ def judging_methods(significance):
         return "delta method"
     return (("delta method; " if len(resampled) < len(significance) else "")
             + f"{', '.join(resampled)} by resampling the reference, {DEFAULT_DRAWS} draws")
+
+
+def extension_rows(ext, metrics):
+    """``[{"family", "base", "median", "counts", "cells": [text per scene]}]`` of the extensions' table
+    (:func:`harness.study.extensions.effects`): per scene the ratio of the ranking metric, extension over
+    base, and the judged outcome."""
+    out = []
+    for f in ext["families"]:
+        cells = []
+        for s in ext["scenes"]:
+            c = f["cells"].get(s)
+            cells.append("–" if c is None else f"{g(c['ratio'])} {c['outcome']}")
+        out.append({"family": f["family"], "base": f["base"], "median": g(f["median_ratio"]),
+                    "counts": f"{f['better']} / {f['worse']} / {f['scenes']}", "cells": cells})
+    return out
+
+
+def extension_lines(ext):
+    """The outside treatment chosen for the extensions, as sentences."""
+    d = ext.get("default_outside")
+    if d is None:
+        return ["The study rendered no family whose only extension is an outside treatment: no default is chosen."]
+    modes = ", ".join(f"{m} {g(v)} ({d['scenes'][m]} scene-mapping pairs)" for m, v in sorted(d["by_mode"].items()))
+    return [f"Median {ext['metric']} ratio against the paper's outside treatment (vacuum), pooled over the mappings "
+            f"and scenes: {modes}.",
+            f"Outside treatment for the extensions, by that measure: **{d['outside']}** (median ratio "
+            f"{g(d['median_ratio'])}). SSLPV's own default stays the paper's (vacuum)."]

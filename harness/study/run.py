@@ -26,9 +26,10 @@ from pathlib import Path
 from harness.io.atomic import atomic_dir, atomic_write
 from harness.io.outputs import SWEEP_MARKER, check_owned_folder
 from harness.study import figures as figs
+from harness.study.extensions import default_outside, effects, is_extension
 from harness.study.headline import _Images, headline
 from harness.study.limits import limits
-from harness.study.present import budget_rows, headline_rows, judging_methods, limit_lines
+from harness.study.present import budget_rows, extension_lines, extension_rows, headline_rows, judging_methods, limit_lines
 from harness.study.spec import load_study
 from harness.study.table import rows_of, write_csv, write_parquet
 
@@ -111,10 +112,15 @@ def build_outputs(out, study, summary, command, key=None):
     write_csv(rows, out / "results.csv")
     write_parquet(rows, out / "results.parquet")
     images = _Images()
-    head = headline(rows, study["budget"], study["metrics"], study["significance"])
+    # the headline, its plots and limits keep the published method and the calibrations; the extensions
+    # have their own table, each against its base family
+    paper_rows = [r for r in rows if not is_extension(r)]
+    head = headline(paper_rows, study["budget"], study["metrics"], study["significance"])
     lims = limits(rows, head["scenes"], head["metric"], study["twins"], study["calibrations"], study["budget"],
                   images)
-    names = write_figures(out, rows, head, study)
+    ext = effects(rows, study["budget"], study["metrics"], study["significance"], images)
+    ext["default_outside"] = default_outside(ext)
+    names = write_figures(out, paper_rows, head, study)
     reused = sum(r["cached"] for r in rows)
     info = {"title": study["title"], "commit": run.get("git_commit") or git_commit(), "commit_now": git_commit(),
             "dirty": _dirty(Path(__file__).resolve().parents[2]), "gl_renderer": run.get("gl_renderer") or summary.get("gl_renderer"),
@@ -125,18 +131,19 @@ def build_outputs(out, study, summary, command, key=None):
             "references": _reference_info(summary["references"]), "store": summary["store"],
             "run_id": summary["run_id"], "configurations": len(rows), "reused": reused,
             "rendered": len(rows) - reused, "sweep_wall_s": summary.get("wall_s"), "alpha": ALPHA,
-            "figures": names, "limits": lims, "inputs_key": key,
+            "figures": names, "limits": lims, "extensions": ext, "inputs_key": key,
             "headline": {s: {f: {"setting": c["row"]["setting"], "status": c["status"], "changes": c["changes"]}
                              for f, c in cells.items()} for s, cells in head["overall"].items()}}
     _render_page(out / "index.html", info=info, head=head, metrics=study["metrics"], budget=study["budget"],
                  significance=study["significance"], methods=judging_methods(study["significance"]), alpha=ALPHA,
                  figures=names,
                  headline_rows=headline_rows(head, study["metrics"]), budget_rows=budget_rows(head, study["metrics"]),
-                 limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims])
+                 limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims],
+                 extension_rows=extension_rows(ext, study["metrics"]), extension_lines=extension_lines(ext))
     # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output
     with atomic_write(out / "study.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1, default=str))
-    return {"rows": rows, "head": head, "limits": lims, "info": info}
+    return {"rows": rows, "head": head, "limits": lims, "extensions": ext, "info": info}
 
 
 def run_study(study_path, out, size=None, scheduler=None, workers=None, progress=True, cache=True, command=None,

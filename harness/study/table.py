@@ -19,6 +19,7 @@ import json
 from harness.io.atomic import atomic_write
 from harness.metrics import METRICS
 from harness.methods import config_label
+from harness.study.extensions import family_suffix
 from harness.study.spec import study_label
 
 IMAGES = ("subsurface", "full")
@@ -32,9 +33,10 @@ def family_of(method, params):
     """The family a configuration competes in: SSLPV's mapping (``calibrated diffusion`` for a calibrated
     file of that family), a rival's method and gather (``dipole dense``), with ``S1`` where it adds Jensen
     et al.'s single scattering (``dipole dense + S1``, ``terms = both``; ``dipole dense S1 only`` for
-    ``terms = single``)."""
+    ``terms = single``). An SSLPV configuration with options the paper does not have competes in its own
+    family, named after them (``collision + interior``; :mod:`harness.study.extensions`)."""
     if method == "sslpv":
-        return study_label(params.get("mapping"))
+        return study_label(params.get("mapping")) + family_suffix(params)
     terms = params.get("terms", "diffusion")
     suffix = {"both": " + S1", "single": " S1 only"}.get(terms, "")
     return f"{method} {params.get('gather', '')}".strip() + suffix

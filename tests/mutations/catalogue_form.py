@@ -1,10 +1,12 @@
 """The planted errors in the calibration that depends on the material (:mod:`sslpv_gl.material_form`, its
-version 3 file and its leave-one-scene-out fit, :mod:`harness.calibration.form`); the rest are in
+version 3 file and its leave-one-scene-out fit, :mod:`harness.calibration.form`), and in the study's
+families of calibrations and extensions; the rest are in
 :mod:`.catalogue`."""
 
 from .runner import Mutation
 
 FT = "tests/test_calibrated_form.py"
+XT = "tests/test_study_extensions.py"
 
 FORM = (
     Mutation("form_loso_leak", "mapping", "harness/calibration/form.py",
@@ -46,4 +48,17 @@ FORM = (
              "+ (\" form\" if any(b.form is not None for b in cal.budgets) else \"\")", "",
              (f"{FT}::test_study_names_a_form_apart_from_its_scalar_family",),
              "the study labels a per-cell form as its scalar family: the two share one headline column"),
+    Mutation("study_extension_in_paper_family", "cli", "harness/study/table.py",
+             "return study_label(params.get(\"mapping\")) + family_suffix(params)",
+             "return study_label(params.get(\"mapping\"))",
+             (f"{XT}::test_family_names_the_extensions",),
+             "an SSLPV configuration with an extension (outside = interior) competes in the paper's family"),
+    Mutation("study_extension_outcome_inverted", "cli", "harness/study/extensions.py",
+             '"tied": "≈", "worse": "better", "better-in-part"', '"tied": "≈", "worse": "worse", "better-in-part"',
+             (f"{XT}::test_each_extension_is_judged_against_its_base",),
+             "an extension that beats its base beyond noise is reported as worse"),
+    Mutation("study_headline_keeps_extensions", "cli", "harness/study/run.py",
+             "paper_rows = [r for r in rows if not is_extension(r)]", "paper_rows = rows",
+             ("tests/test_study.py::test_headline_table_and_limits",),
+             "the headline table takes the extension families as columns beside the published method"),
 )

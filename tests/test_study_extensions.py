@@ -1,0 +1,103 @@
+"""The extensions beside the published method in the study (``harness.study.extensions``), without GL.
+
+Synthetic rows and images (as ``tests/test_study.py``'s FLIP tests): the family names a configuration
+with options the paper does not have gets; each extension family judged against its base family by the
+headline's paired judgement (an extension that halves the error on one scene is better beyond noise, one
+that renders the same image is tied); the budget's rows only; the outside treatment chosen for the
+extensions is the one with the lowest pooled median ratio. The end-to-end study
+(``tests/test_study.py``) checks that the headline keeps extension families out.
+"""
+
+import numpy as np
+import pytest
+
+from harness.study.extensions import base_family, default_outside, effects, extension_tags, family_suffix, is_extension
+from harness.study.table import family_of
+
+
+class _StubImages:
+    def __init__(self, renders, ref):
+        self.renders, self.ref = renders, ref
+
+    def render(self, d):
+        return self.renders[d]
+
+    def reference(self, d, shape):
+        return self.ref
+
+
+@pytest.mark.parametrize("params, family", [
+    ({"mapping": "collision", "outside": "vacuum"}, "collision"),
+    ({"mapping": "collision", "outside": "interior"}, "collision + interior"),
+    ({"mapping": "diffusion", "boundary_reflect": "rdr", "outside": "interior"}, "diffusion + interior + R_dr"),
+    ({"mapping": "literal", "phase_scaling": "delta-eddington"}, "literal + δ-Eddington"),
+    ({"mapping": "collision", "eta2": True, "inject_offset": 0.25}, "collision + η² + offset 0.25"),
+    ({"mapping": "collision", "eta2": False, "inject_offset": 0.0, "phase_scaling": "none"}, "collision"),
+])
+def test_family_names_the_extensions(params, family):
+    assert family_of("sslpv", params) == family
+    assert base_family(family) == params["mapping"]
+    assert (family_suffix(params) != "") == bool(extension_tags(params))
+
+
+def test_rivals_have_no_extension_family():
+    assert family_of("dipole", {"gather": "dense", "outside": "interior"}) == "dipole dense"
+    assert not is_extension({"method": "dipole", "family": "dipole dense + S1"})
+    assert is_extension({"method": "sslpv", "family": "collision + interior"})
+
+
+def _rows_and_images():
+    rng = np.random.default_rng(5)
+    y = 0.2 + rng.random((24, 24, 3))
+    ref = {"subsurface": y, "se": 0.002 * y, "mask": np.ones((24, 24), bool), "K": 8}
+    renders, rows = {}, []
+
+    def add(scene, family, k, scale, n=32):
+        name = f"{scene}/{family}/{n}/{k}"
+        renders[name] = y * scale
+        params = {"mapping": base_family(family)}
+        if family != base_family(family):
+            params["outside"] = family.split(" + ")[1]
+        rows.append({"scene": scene, "method": "sslpv", "family": family_of("sslpv", params), "setting": name,
+                     "N": n, "K": str(k), "render_dir": name, "reference_dir": "ref",
+                     "subsurface_relmse": float(np.mean((y * scale - y) ** 2 / (y ** 2 + 1e-2))),
+                     "subsurface_energy_ratio": scale})
+
+    add("a", "collision", 8, 1.4)
+    add("a", "collision", "steady", 1.2)              # the base's best on a
+    add("a", "collision + interior", 8, 1.1)           # the extension halves the error: better
+    add("a", "collision + interior", 8, 1.0, n=16)     # outside the budget's grid: ignored
+    add("b", "collision", 8, 1.3)
+    add("b", "collision + interior", 8, 1.3)           # the same image: tied
+    add("b", "collision + absorb", 8, 1.6)             # worse
+    add("b", "diffusion + absorb", 8, 1.5)             # no base family rendered
+    return rows, _StubImages(renders, ref)
+
+
+def test_each_extension_is_judged_against_its_base():
+    rows, images = _rows_and_images()
+    budget = {"grid": 32, "steps": [8, 16, "steady"]}
+    found = effects(rows, budget, ["relmse", "energy_ratio"], ["relmse", "energy_ratio"], images)
+    fams = {f["family"]: f for f in found["families"]}
+    assert set(fams) == {"collision + interior", "collision + absorb", "diffusion + absorb"}
+    inter = fams["collision + interior"]
+    a, b = inter["cells"]["a"], inter["cells"]["b"]
+    assert a["outcome"] == "better" and a["base_setting"] == "a/collision/32/steady"
+    assert a["setting"] == "a/collision + interior/32/8"          # the N = 16 row does not compete
+    assert a["ratio"] == pytest.approx(rows[2]["subsurface_relmse"] / rows[1]["subsurface_relmse"])
+    assert b["outcome"] == "≈" and b["ratio"] == pytest.approx(1.0)
+    assert (inter["better"], inter["worse"], inter["scenes"]) == (1, 0, 2)
+    assert inter["median_ratio"] == pytest.approx(np.median([a["ratio"], 1.0]))
+    assert fams["collision + absorb"]["cells"]["b"]["outcome"] == "worse"
+    assert fams["diffusion + absorb"]["cells"]["b"]["outcome"] == "no base"
+    assert fams["diffusion + absorb"]["median_ratio"] is None
+    assert found["comparisons"] == 3
+
+
+def test_the_outside_treatment_for_the_extensions():
+    rows, images = _rows_and_images()
+    found = effects(rows, {"grid": 32, "steps": [8, "steady"]}, ["relmse"], ["relmse"], images)
+    d = default_outside(found)
+    assert d["outside"] == "interior" and set(d["by_mode"]) == {"interior", "absorb"}
+    assert d["by_mode"]["absorb"] > 1 > d["by_mode"]["interior"]
+    assert default_outside({"families": []}) is None
