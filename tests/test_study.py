@@ -293,6 +293,11 @@ def test_headline_table_and_limits(runs):
         assert c["outcome"] in {"better", "worse", "≈", "mixed", "≈ (better in part)", "≈ (base better in part)"}
         assert "outside=interior" in c["setting"] and "outside" not in c["base_setting"]
     assert ext["default_outside"]["outside"] == "interior"
+    for scene in head["scenes"]:          # the limits' subject is a headline family's; its interior twin is beside it
+        subject = lims[scene]["subject"]
+        assert "outside=interior" not in subject
+        modes = [m["outside"] for m in lims[scene]["outside"]["other_modes"]]
+        assert modes == (["interior"] if subject in ("N16-K4-collision", "N16-K8-collision") else []), (subject, modes)
     assert "The extensions beside the published method" in html and "collision + interior" in html
 
 

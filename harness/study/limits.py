@@ -1,7 +1,7 @@
 """What limits SSLPV on each scene, from measured decompositions where the study has the data.
 
-For each scene the *subject* is the best SSLPV setting of the headline (over every SSLPV family and
-budget, by the study's first metric). Four decompositions, each present only where measured:
+For each scene the *subject* is the best SSLPV setting of the headline (over every SSLPV family of the
+headline, the extension families left out, and budget, by the study's first metric). Four decompositions, each present only where measured:
 
 * **steps** (``K`` against ``steady``): the subject's family and settings at ``steady`` against the
   subject at its own K; a paired difference against the scene's reference (delta method), so the
@@ -9,7 +9,8 @@ budget, by the study's first metric). Four decompositions, each present only whe
   is itself ``steady`` (then its K-error is nil by construction) or the study has no ``steady`` row.
 * **outside** (light that leaves the object and travels through empty cells): the renderer's own
   diagnostic ``outside_share`` (the share of the accumulated energy in cells outside the mesh) of the
-  subject, and, where the study rendered the subject with another ``outside`` mode, that row's error.
+  subject, and, where the study rendered the subject with another ``outside`` mode (an extension family,
+  :mod:`harness.study.extensions`), that row's error.
 * **boundary** (index-matched against dielectric): for each ``[[twins]]`` pair, the subject's family
   and setting on both scenes; a difference of two scenes, so no paired standard error (different
   references): both noise floors are shown instead.
@@ -25,6 +26,7 @@ import json
 from pathlib import Path
 
 from harness.metrics.uncertainty import paired_difference
+from harness.study.extensions import is_extension
 from harness.study.headline import _Images, _rank_value
 
 
@@ -72,7 +74,7 @@ def _outside(rows, subject):
         out["why"] = "the renderer recorded no outside share for this row"
     p = json.loads(subject["params_json"])
     others = []
-    for mode in ("vacuum", "material", "absorb", "extrapolated"):
+    for mode in ("vacuum", "material", "absorb", "extrapolated", "interior"):
         if mode != p.get("outside"):
             r = _same_but(rows, subject, outside=mode)
             if r is not None:
@@ -133,7 +135,9 @@ def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
     images = images or _Images()
     out = {}
     for scene in scenes:
-        s = subject_of(rows, scene, metric, budget)
+        # the subject is the published method's or a calibration's (the headline's families); the extension
+        # rows serve the outside decomposition below
+        s = subject_of([r for r in rows if not is_extension(r)], scene, metric, budget)
         if s is None:
             continue
         out[scene] = {"subject": s["setting"], "relmse": s["subsurface_relmse"],
