@@ -101,3 +101,5 @@ def test_the_outside_treatment_for_the_extensions():
     assert d["outside"] == "interior" and set(d["by_mode"]) == {"interior", "absorb"}
     assert d["by_mode"]["absorb"] > 1 > d["by_mode"]["interior"]
     assert default_outside({"families": []}) is None
+    worse = {"families": [{"family": "collision + interior", "cells": {"a": {"ratio": 1.3}, "b": {"ratio": 1.1}}}]}
+    assert default_outside(worse)["outside"] == "vacuum"          # nothing beats the paper's treatment

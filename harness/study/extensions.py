@@ -20,7 +20,9 @@ worse beyond the reference's noise.
 
 :func:`default_outside`: the outside treatment for the extensions, chosen by the measured effect on the
 suite: among the families whose only extension is an outside treatment, the treatment whose median
-ratio, pooled over their mappings' scenes, is lowest; ``None`` when the study rendered none. The
+ratio, pooled over their mappings' scenes, is lowest, provided it is below 1 (the paper's ``vacuum``
+is the ratio 1 by definition, and stays the choice when no treatment beats it); ``None`` when the
+study rendered none. The
 paper's own default (``vacuum``) stays SSLPV's default: this choice is what the extensions are
 measured and calibrated with.
 
@@ -151,6 +153,7 @@ def default_outside(found):
     by_mode = {m: statistics.median(v) for m, v in pooled.items() if v}
     if not by_mode:
         return None
-    mode = min(by_mode, key=by_mode.get)
-    return {"outside": mode, "median_ratio": by_mode[mode], "by_mode": by_mode,
+    best = min(by_mode, key=by_mode.get)
+    mode = best if by_mode[best] < 1.0 else PAPER["outside"]     # the paper's treatment is ratio 1 by definition
+    return {"outside": mode, "median_ratio": by_mode.get(mode, 1.0), "by_mode": by_mode,
             "scenes": {m: len(v) for m, v in pooled.items()}}
