@@ -23,9 +23,10 @@ scatters in the medium traced from the point light through every specular path
 (:mod:`harness.reference.specular_paths`: one refraction, chains through 3, 5 ... crossings,
 paths with a reflection) against what ``mneevolpath``'s connections deliver
 (:mod:`harness.reference.connection_power`), the share of connections by crossing count of the
-seed segment (``stats``, at ``--size``), and, on ``torus_hole``, the area-light limit at each
-``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
-``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`).
+seed segment (``stats``, at ``--size``), and, when ``torus_hole`` is among them, the area-light limit
+at each ``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
+``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`) for the default scenes and
+``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes validation_scenes/bunny_dielectric``).
 
 Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
 ``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``
@@ -35,6 +36,7 @@ Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size
 import argparse
 import dataclasses
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -83,7 +85,7 @@ def main():
     ap.add_argument("--depths", type=int, nargs="+", default=[4, 5, 6])
     ap.add_argument("--photons", type=int, default=1 << 16)
     ap.add_argument("--points", type=int, default=1 << 19)
-    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/mnee_chains.md (with --decompose)")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/mnee_chains[_<scenes>].md (with --decompose)")
     args = ap.parse_args()
     mi = ms.use_variant("llvm_ad_rgb")
     if args.decompose:
@@ -148,13 +150,20 @@ def rgb(a, digits=3):
     return " / ".join(f"{v:.{digits}f}" for v in np.ravel(a))
 
 
+def page_name(scenes):
+    """``mnee_chains`` for the default scenes, ``mnee_chains_<last path parts>`` for another set (one page per set)."""
+    if list(scenes) == list(SMOOTH_SCENES):
+        return "mnee_chains"
+    return "mnee_chains_" + "_".join(Path(s).name for s in scenes)
+
+
 def decompose(mi, args):
     """First-scattered light by path type, traced and delivered; crossing counts; the area-light limit (docstring)."""
     from page import Page
 
     from harness.reference import connection_power, losses, specular_paths
 
-    page = Page("mnee_chains", "Manifold connections on curved and non-convex meshes: what they deliver, what they miss")
+    page = Page(page_name(args.scenes), "Manifold connections on curved and non-convex meshes: what they deliver, what they miss")
     page.para(
         "The power that first scatters in the medium, traced from the point light through every specular path "
         f"({args.photons} photons split deterministically at each boundary hit, `harness/reference/specular_paths.py`), "
@@ -199,6 +208,9 @@ def decompose(mi, args):
                 "not made (counted)"], rows,
                note=f"Shares of the connections from medium vertices ({args.size} x {args.size}, "
                     f"{losses.LOSS_SEEDS} x {losses.LOSS_SPP} spp, `stats`).")
+    if "torus_hole" not in args.scenes:     # the area-light limit is measured on the torus lit through its hole
+        page.finish(args.write)
+        return
     scene = nonconvex.torus_hole(1.4).with_resolution(args.size, args.size)
     traced = specular_paths.trace(scene, photons=args.photons)["by_label"]
     total = sum(traced.values(), np.zeros(3))

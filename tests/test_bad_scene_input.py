@@ -141,11 +141,20 @@ SCENE_CASES = [
     ("roughness-above-one", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4).replace("0.0", "1.5")),
      "boundary.roughness", "[0, 1]"),
     ("eta-string", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta='"glass"')), "boundary.eta", "must be a number"),
-    # the longest chain of refractions of the exact reference (issue 26)
+    # the longest chain of refractions of the exact reference
     ("max-crossings-zero", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nmax_crossings = 0"),
      "boundary.max_crossings", "must be an integer in [1, 9], got 0"),
     ("max-crossings-above-limit", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nmax_crossings = 10"),
      "boundary.max_crossings", "must be an integer in [1, 9], got 10"),
+    # specular manifold sampling of the exact reference
+    ("sms-trials-negative", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nsms_trials = -1"),
+     "boundary.sms_trials", "must be an integer in [0, 1024], got -1"),
+    ("sms-trials-above-limit", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nsms_trials = 5000"),
+     "boundary.sms_trials", "[0, 1024]"),
+    ("sms-chain-ends-inside", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + '\nsms_chains = "T,TT"'),
+     "boundary.sms_chains", "'TT' ends inside the medium"),
+    ("sms-chain-reflects-outside-first", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + '\nsms_chains = "rT"'),
+     "boundary.sms_chains", "cannot follow a segment inside"),
 ]
 
 

@@ -100,8 +100,11 @@ class TestChainMath:
             ray = si.spawn_ray(ray.d)
         return x0, tri
 
-    def test_chain_jacobian_matches_central_differences(self, mi, torus_chain):
-        """The whole 6 x 6 dC/dX (A, B, U blocks) against central differences over the six barycentric parameters."""
+    @pytest.mark.parametrize("kinds", [None, ("R", "R", "T"), ("T", "r", "r")])
+    def test_chain_jacobian_matches_central_differences(self, mi, torus_chain, kinds):
+        """The whole 6 x 6 dC/dX (A, B, U blocks) against central differences over the six barycentric parameters;
+        for refractions only and for chains with reflections inside and outside (the typed constraint of
+        :mod:`harness.reference.mnee_sms`: the same index on both sides of a reflection)."""
         import drjit as dr
 
         from harness.reference import mnee_chain as mc
@@ -125,7 +128,7 @@ class TestChainMath:
                 first = p if i == 0 else first
             w = first - x0
             C, A, B, U, _ = mc.chain_blocks(V3(w / np.linalg.norm(w)), mi.Float(np.linalg.norm(w)), verts, V3(y),
-                                            mi.Float(1.4))
+                                            mi.Float(1.4), kinds)
             c = np.array([float(dr.slice(v)) for ci in C for v in ci])
             J = np.zeros((6, 6))
             for i in range(3):

@@ -41,42 +41,61 @@ def _inside(mi, dr, scene, x0, crossings=16):
     return (np.asarray(count) % 2) == 1
 
 
-def delivered(scene, points=1 << 18, seed=0, variant="llvm_ad_rgb"):
-    """``(power, se, inside_share)``: first-scattered power (3,) delivered by ``mneevolpath``'s connections.
+def connection_values(scene, x, inside=None, seed=0, variant="llvm_ad_rgb", integrator=None):
+    """``mneevolpath``'s connection at points ``x`` (P, 3) of the medium, part by part.
 
-    ``scene`` must have a smooth dielectric boundary (the integrator is ``mneevolpath``) and
-    point lights. ``se`` is the standard error (3,) over the ``points`` uniform points.
+    Returns ``(parts, inside)``: ``parts`` a list of (P, 3) arrays, the light each connection delivers
+    at each point (irradiance perpendicular to its direction, ``I G T Tr``): the single refraction from
+    the straight seed first, then the chains through 3, 5, ... crossings, then one per chain kind
+    of specular manifold sampling (``integrator["sms_chains"]``, :mod:`harness.reference.mnee_sms`);
+    ``inside`` (P,) where a point lies in the mesh (every point counts when given). ``integrator``:
+    parameters of ``mneevolpath`` to set beside the scene's (e.g. ``{"sms_trials": 64}``).
     """
     from harness.reference import mitsuba_scene as ms
 
     mi = ms.use_variant(variant)
     import drjit as dr
 
-    from harness.reference.specular_paths import _grid_lookup
-
     d = ms.build_scene_dict(scene, max_depth=-1)
     if d["integrator"]["type"] != "mneevolpath":
-        raise ValueError("connection_power.delivered: the scene's boundary is not a smooth dielectric")
+        raise ValueError("connection_power: the scene's boundary is not a smooth dielectric")
+    d["integrator"].update(integrator or {})
     mscene = mi.load_dict(d)
     integ = mscene.integrator()
     integ._prepare(mscene)
     medium = mscene.shapes()[0].interior_medium()
-    m = scene.medium
-    lo, hi = np.asarray(m.bbox_min, np.float64), np.asarray(m.bbox_max, np.float64)
-    rng = np.random.default_rng(seed)
-    x = lo + (hi - lo) * rng.random((points, 3))
-    x0 = mi.Point3f(*[mi.Float(x[:, i].astype(np.float32)) for i in range(3)])
-    inside = _inside(mi, dr, mscene, x0)
-    mei = dr.zeros(mi.MediumInteraction3f, points)
+    n = len(x)
+    x0 = mi.Point3f(*[mi.Float(np.asarray(x)[:, i].astype(np.float32)) for i in range(3)])
+    inside = _inside(mi, dr, mscene, x0) if inside is None else np.asarray(inside, bool)
+    mei = dr.zeros(mi.MediumInteraction3f, n)
     mei.p = x0
     mei.t = mi.Float(0.0)
     mei.medium = dr.select(mi.Bool(inside), medium, dr.zeros(mi.MediumPtr))
     sampler = mi.load_dict({"type": "independent"})
-    sampler.seed(seed, points)
-    active = mi.Bool(inside)
-    value, _, _, (chain_value, _), _ = integ._connect(mscene, sampler, mei, mei.medium, active, mi.UInt32(0),
-                                                     lambda w, a: mi.Float(0.0))
-    phi = np.stack([np.asarray(value[i], np.float64) + np.asarray(chain_value[i], np.float64) for i in range(3)], 1)
+    sampler.seed(seed, n)
+    value, _, _, extras, _ = integ._connect(mscene, sampler, mei, mei.medium, mi.Bool(inside), mi.UInt32(0),
+                                            lambda w, a: mi.Float(0.0))
+    parts = [value] + [v for v, _ in extras]
+    return [np.stack([np.asarray(v[i], np.float64) for i in range(3)], 1) for v in parts], inside
+
+
+def delivered(scene, points=1 << 18, seed=0, variant="llvm_ad_rgb", integrator=None, parts=False):
+    """``(power, se, inside_share)``: first-scattered power (3,) delivered by ``mneevolpath``'s connections.
+
+    ``scene`` must have a smooth dielectric boundary (the integrator is ``mneevolpath``) and
+    point lights. ``se`` is the standard error (3,) over the ``points`` uniform points.
+    ``integrator``: as in :func:`connection_values`. ``parts=True`` returns ``power`` and ``se`` per
+    part instead, (parts, 3) in the order of :func:`connection_values`.
+    """
+    from harness.reference.specular_paths import _grid_lookup
+
+    m = scene.medium
+    lo, hi = np.asarray(m.bbox_min, np.float64), np.asarray(m.bbox_max, np.float64)
+    rng = np.random.default_rng(seed)
+    x = lo + (hi - lo) * rng.random((points, 3))
+    values, inside = connection_values(scene, x, seed=seed, variant=variant, integrator=integrator)
     st, al = _grid_lookup(m, x)
-    f = np.where(inside[:, None], st * al * phi, 0.0) * float(np.prod(hi - lo))
-    return f.mean(0), f.std(0, ddof=1) / np.sqrt(points), float(inside.mean())
+    f = np.stack([np.where(inside[:, None], st * al * phi, 0.0) for phi in (values if parts else [sum(values)])])
+    f *= float(np.prod(hi - lo))
+    power, se = f.mean(1), f.std(1, ddof=1) / np.sqrt(points)
+    return (power, se, float(inside.mean())) if parts else (power[0], se[0], float(inside.mean()))

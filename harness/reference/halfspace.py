@@ -279,3 +279,33 @@ def slab_outside_share(scene, setup=SLAB_SETUP, sub=2, nodes=32):
         out |= (zc < z0) | (zc > z1)
     w = np.exp(-st * (z + b) / np.cos(th_i))
     return float((w * out).sum() / w.sum())
+
+
+def reflected_irradiance(points, light_pos, intensity, eta, sigma_t, thickness, fresnel="reflect"):
+    """Irradiance per point (P, 3) at ``points`` (P, 3) inside a slab ``-thickness < y < 0`` (flat smooth
+    faces, air above and below) from a point light above it, along the light path that enters the top
+    face, reflects off the bottom face inside and reaches the point (the photon label ``ER``).
+
+    The bottom face mirrors the point to depth ``2 thickness - z``: the path is the half-space's single
+    refraction to the mirror point (every angle in the medium is the same at both faces), so the ray
+    tube's irradiance is the half-space's at that depth (module docstring) times the Fresnel
+    transmittance at the top, the Fresnel reflectance at the bottom (the same angles, so ``1 - T``:
+    below the critical angle inside), and the transmittance along ``(2 thickness - z) / cos th_i``.
+    Another route to the value of ``mneevolpath``'s reflection chain ``("R", "T")``
+    (:mod:`harness.reference.mnee_sms`). ``fresnel = "transmit"`` plants the error of a reflection
+    weighted by the transmittance.
+    """
+    pts = np.asarray(points, float)
+    light = np.asarray(light_pos, float)
+    h = light[1]
+    z = 2.0 * thickness + pts[:, 1]                            # the mirror point's depth
+    rho = np.linalg.norm(pts[:, [0, 2]] - light[[0, 2]], axis=1)
+    th_i = refraction_angle(rho, z, h, eta)
+    sin_i, cos_i = np.sin(th_i), np.cos(th_i)
+    cos_o = np.sqrt(np.maximum(1.0 - (eta * sin_i) ** 2, 0.0))
+    drho = h / cos_o ** 2 + z / cos_i ** 2 * cos_o / (eta * cos_i)
+    e_perp = eta * sin_i / (np.maximum(rho, 1e-300) * cos_i * drho)
+    t = fresnel_transmittance(cos_o, eta)
+    bottom = 1.0 - t if fresnel == "reflect" else t
+    att = np.exp(-np.asarray(sigma_t, float)[None, :] * (z / cos_i)[:, None])
+    return (np.asarray(intensity, float)[None, :] * (e_perp * t * bottom)[:, None]) * att

@@ -23,8 +23,9 @@ reference's size) and returns, per colour channel:
   through every specular path (:func:`harness.reference.specular_paths.trace`, an independent
   route: :data:`TRACE_PHOTONS` photons), by class (``direct``: one refraction; ``chain3``,
   ``chain5`` ...: through other parts of the object; ``reflection``: any reflection on the
-  way, which no connection makes), against the same power as the connections deliver it
-  (:func:`harness.reference.connection_power.delivered`, :data:`DELIVERED_POINTS` points):
+  way, which only the sampled chains of ``[boundary] sms_trials`` make), against the same power
+  as the connections deliver it (:func:`harness.reference.connection_power.delivered`,
+  :data:`DELIVERED_POINTS` points):
   ``missed_share = 1 - delivered / traced`` and its standard error. It counts every loss of the
   connections at once: reflection vertices, single walks that end on another (occluded)
   solution than the one that carries the light, chains the straight seed does not lead to.
@@ -169,5 +170,6 @@ def check_exact(ref_dir):
     if meta.get("exact", True) is not False:
         return
     raise InputError(meta_path, "exact", f"{meta.get('exact_note', 'the reference is not exact')}; SSLPV is not "
-                     "judged against it", f"raise [boundary] max_crossings and re-render it, or set {ALLOW_ENV}=1 "
-                     "to judge against it anyway")
+                     "judged against it", f"raise [boundary] max_crossings or set [boundary] sms_trials = 256 (chains "
+                     f"with a reflection, further solutions) and re-render it, or set {ALLOW_ENV}=1 to judge against "
+                     "it anyway")

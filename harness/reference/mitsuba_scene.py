@@ -326,6 +326,8 @@ def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEP
     d = {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
     if smooth_dielectric(scene.boundary):
         d = {**d, "type": "mneevolpath", **MNEE_PARAMS, "max_crossings": int(scene.boundary.max_crossings)}
+        if scene.boundary.sms_trials:          # specular manifold sampling (harness.reference.mnee_sms)
+            d.update(sms_trials=int(scene.boundary.sms_trials), sms_chains=str(scene.boundary.sms_chains))
     return d
 
 

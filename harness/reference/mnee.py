@@ -33,6 +33,15 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - |int|
      - Longest chain of refractions a connection follows (1, 3, 5, ... crossings of the
        boundary along the seed segment; 1 is a single refraction), 1 to 9. Default: 5
+   * - sms_trials
+     - |int|
+     - Specular manifold sampling (:mod:`harness.reference.mnee_sms`, Zeltner et al. 2020) of the
+       connections the straight seed misses: the most Bernoulli trials that weigh one sampled
+       solution (0: off), 0 to 1024. ``[boundary] sms_trials`` of a scene sets it. Default: 0
+   * - sms_chains
+     - |string|
+     - With ``sms_trials``: the chains sampled, from the medium vertex: ``T`` a refraction, ``R``
+       a reflection inside, ``r`` one off the outside, comma-separated. Default: ``T,RT,Tr,TTT``
    * - stats
      - |bool|
      - Add AOV channels per pixel (sums over the path's vertices, averaged over samples,
@@ -98,6 +107,11 @@ estimation (Hanika, Droske and Fascione, "Manifold Next Event Estimation", EGSR 
    Fresnel at every vertex, ratio tracking through every medium segment, the air segments
    unoccluded, the geometry term from the first block of ``(dC/dX)^-1 dC/dy``). Its light
    is added to that of the single-refraction walk: the two are distinct paths.
+7. **Specular manifold sampling** (``sms_trials`` > 0; :mod:`harness.reference.mnee_sms`): from random
+   seeds, further solutions of the single refraction and of the three-crossing chain, and chains
+   with a reflection vertex (``sms_chains``), each weighted by Bernoulli trials that estimate the
+   inverse of the probability that a random seed finds it (Zeltner, Georgiev and Jakob 2020). Also
+   added: distinct paths.
 
 What is not covered, and how it is handled
 ------------------------------------------
@@ -110,10 +124,12 @@ What is not covered, and how it is handled
   as much as their estimated light; with chains it agrees with index-matched ``volpath``.
 * **Specular chains with a reflection**: light that reaches ``x0`` after a reflection at
   the boundary (inside or outside) followed by refractions toward the light is not
-  connected; on a flat interface none exists, on a curved one it is lost.
+  connected by the straight seed; with ``sms_trials`` > 0 the chains named in ``sms_chains``
+  are sampled (7.); the others are lost.
 * **A constraint with several solutions** (near caustics of the interface, or where the
   straight seed leads to a solution that another part of the object occludes while another
-  one is free): the walk finds the solution its seed leads to and the others are lost.
+  one is free): the walk finds the solution its seed leads to; the others are lost unless
+  ``sms_trials`` samples them (``T`` and ``TTT`` chains).
 * Both are counted, not fixed: :mod:`harness.reference.losses` traces the light that first
   scatters in the medium through every specular path (:mod:`harness.reference.specular_paths`)
   and sets it against what these connections deliver (:mod:`harness.reference.connection_power`);
@@ -165,6 +181,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from harness.reference import mnee_chain as chain  # noqa: E402
+from harness.reference import mnee_sms as sms  # noqa: E402
 from harness.reference.mnee_connect import (  # noqa: E402, F401 (the walk's names, re-exported)
     CROSSING_BINS, MAX_SEGMENT_HITS, MIN_STEP, WALK_FLAGS, ManifoldConnections)
 from harness.reference.mnee_vertex import (  # noqa: E402, F401
@@ -173,10 +190,12 @@ from harness.reference.mnee_vertex import (  # noqa: E402, F401
 
 PLUGIN_NAME = "mneevolpath"
 DEFAULTS = {"max_depth": -1, "rr_depth": 5, "newton_iterations": 32, "newton_tolerance": 1e-5,
-            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0, "max_crossings": 5}
+            "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0, "max_crossings": 5, "sms_trials": 0,
+            "sms_chains": sms.SMS_CHAINS_DEFAULT}
 STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected",
               "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost", "mnee_over_max",
               "mnee_lost_r", "mnee_lost_g", "mnee_lost_b")
+SMS_AOVS = ("mnee_sms_found", "mnee_sms_capped")
 PROBE_AOVS = ("mnee_probe_rescued", "mnee_probe_missed_r", "mnee_probe_missed_g", "mnee_probe_missed_b")
 
 
@@ -222,12 +241,17 @@ class MNEEVolpathIntegrator(ManifoldConnections):
         if not 1 <= self.max_crossings <= chain.MAX_CROSSINGS_LIMIT:
             raise ValueError(f"{PLUGIN_NAME}: max_crossings = {self.max_crossings} must lie in "
                              f"[1, {chain.MAX_CROSSINGS_LIMIT}]")
+        self.sms_trials = int(get("sms_trials"))
+        if not 0 <= self.sms_trials <= sms.MAX_TRIALS_LIMIT:
+            raise ValueError(f"{PLUGIN_NAME}: sms_trials = {self.sms_trials} must lie in [0, {sms.MAX_TRIALS_LIMIT}]")
+        self.sms_chains = sms.parse_chains(str(get("sms_chains")))
         self._eta_table = None
 
     def aov_names(self):
         if not self.stats:
             return []
-        return list(STATS_AOVS) + (list(PROBE_AOVS) if self.probe_seeds else [])
+        return (list(STATS_AOVS) + (list(SMS_AOVS) if self.sms_trials else [])
+                + (list(PROBE_AOVS) if self.probe_seeds else []))
 
     def to_string(self):
         return (f"MNEEVolpathIntegrator[max_depth = {self.max_depth}, rr_depth = {self.rr_depth}, "
@@ -327,7 +351,7 @@ class MNEEVolpathIntegrator(ManifoldConnections):
             phase = mei.medium.phase_function()
             nee = real & mei.medium.use_emitter_sampling()
             # A manifold connection through k crossings needs k + 1 more segments, a straight one one.
-            value, direction, nee_pdf, (chain_value, chain_dir), stats = self._connect(
+            value, direction, nee_pdf, extras, stats = self._connect(
                 scene, sampler, mei, medium, nee, depth, lambda w, m: phase.eval_pdf(phase_ctx, mei, w, m)[0])
             # Per-vertex counts; the lost light and the probes' missed light (AOVs *_r, *_g, *_b)
             # carry the throughput.
@@ -336,9 +360,10 @@ class MNEEVolpathIntegrator(ManifoldConnections):
                 counters[k] += dr.select(nee, stats[k] * weight, 0.0)
             phase_val, phase_pdf = phase.eval_pdf(phase_ctx, mei, direction, nee)
             L[nee] += beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
-            chained = nee & dr.any(chain_value != 0.0)
-            phase_chain, _ = phase.eval_pdf(phase_ctx, mei, chain_dir, chained)
-            L[chained] += beta * phase_chain * chain_value
+            for extra_value, extra_dir in extras:      # chains, and the sampled solutions (distinct paths)
+                chained = nee & dr.any(extra_value != 0.0)
+                phase_extra, _ = phase.eval_pdf(phase_ctx, mei, extra_dir, chained)
+                L[chained] += beta * phase_extra * extra_value
 
             # ---------------- phase-function sampling
             wo, phase_w, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(real), sampler.next_2d(real), real)

@@ -104,6 +104,42 @@ def indices(i, eta):
     return (eta, 1.0) if i % 2 == 0 else (1.0, eta)
 
 
+#: Vertex kinds of a typed chain (:mod:`harness.reference.mnee_sms`): a refraction, a reflection inside the
+#: medium, a reflection off the outside of the object.
+KINDS = ("T", "R", "r")
+
+
+def sides(kinds):
+    """Whether the light path is inside the medium just before each vertex (from ``x0``, which is inside)."""
+    out, inside = [], True
+    for kind in kinds:
+        if kind not in KINDS or (kind == "R") != inside and kind != "T":
+            raise ValueError(f"mnee_chain: kinds {kinds!r}: {kind!r} cannot follow a segment "
+                             f"{'inside' if inside else 'outside'} the medium; use T, R (inside) or r (outside)")
+        out.append(inside)
+        inside = inside != (kind == "T")
+    if inside:
+        raise ValueError(f"mnee_chain: kinds {kinds!r} end inside the medium; the light is outside")
+    return out
+
+
+def typed_indices(kinds, eta):
+    """``[(eta_a, eta_b)]`` per vertex of a typed chain: a refraction between the medium and air, a
+    reflection with the same index on both sides (``eta`` inside, 1 outside)."""
+    out = []
+    for kind, inside in zip(kinds, sides(kinds)):
+        if kind == "T":
+            out.append((eta, 1.0) if inside else (1.0, eta))
+        else:
+            out.append((eta, eta) if inside else (1.0, 1.0))
+    return out
+
+
+def alternating(k):
+    """The kinds of the chains through k crossings: k refractions."""
+    return ("T",) * k
+
+
 def _frame_derivative(n, dp_du, dn, s, ls):
     """Derivatives of the tangent frame (s, t) of ``n`` when the normal moves by ``dn`` (``dp_du`` fixed)."""
     ds_ = -(dn * dr.dot(n, dp_du) + n * dr.dot(dn, dp_du))
@@ -151,14 +187,18 @@ def vertex_blocks(wa, da, wb, db, ea, eb, v, prev_v, next_v):
     return (dr.dot(h, s), dr.dot(h, t)), blk_a, (b00, b01, b10, b11), blk_u, (s, t)
 
 
-def chain_blocks(omega, dist, verts, y, eta):
+def chain_blocks(omega, dist, verts, y, eta, kinds=None):
     """Constraints, blocks and per-vertex geometry of the chain ``x0 -> verts -> y``.
+
+    ``kinds`` (default: all refractions) names each vertex ``T``, ``R`` or ``r`` (:data:`KINDS`);
+    a reflection's constraint is the half vector with the same index on both sides.
 
     ``x1 = x0 + dist omega`` is kept as the ray from ``x0`` (exact in float32 near the
     surface, as the single-vertex walk). Returns ``(C, A, B, U, aux)``, lists of length k
     (``A[0]`` and ``U[-1]`` None); ``aux`` holds the directions and distances.
     """
     k = len(verts)
+    pairs = typed_indices(kinds or alternating(k), eta)
     C, A, B, U, frames, wa_l, wb_l, da_l, db_l = [], [], [], [], [], [], [], [], []
     for i in range(k):
         p = verts[i][0]
@@ -172,7 +212,7 @@ def chain_blocks(omega, dist, verts, y, eta):
         wb_ = nxt - p
         db = dr.norm(wb_)
         wb = wb_ / db
-        ea, eb = indices(i, eta)
+        ea, eb = pairs[i]
         c, a, b, u, fr = vertex_blocks(wa, da, wb, db, ea, eb, verts[i], verts[i - 1] if i else None,
                                        verts[i + 1] if i < k - 1 else None)
         C.append(c)
@@ -212,16 +252,17 @@ def solve_tridiagonal(A, B, U, rhs):
     return x, det
 
 
-def chain_geometry(omega, dist, verts, y, eta):
+def chain_geometry(omega, dist, verts, y, eta, kinds=None):
     """``G``: irradiance at ``x0`` perpendicular to ``-omega`` per unit intensity through the chain (docstring).
 
-    Returns ``(G, C, aux)``; ``G`` is 0 where ``dC/dX`` is singular.
+    Returns ``(G, C, aux)``; ``G`` is 0 where ``dC/dX`` is singular. The etendue argument holds for
+    any kinds of vertices between ``x0`` (index ``eta``) and the light (index 1).
     """
-    C, A, B, U, aux = chain_blocks(omega, dist, verts, y, eta)
+    C, A, B, U, aux = chain_blocks(omega, dist, verts, y, eta, kinds)
     k = len(verts)
     e1, e2 = mi.coordinate_system(aux["wb"][-1])
     s, t = aux["frames"][-1]
-    eb = indices(k - 1, eta)[1]
+    eb = typed_indices(kinds or alternating(k), eta)[-1][1]
     db = aux["db"][-1]
     # dC_k / dy_perp: the light moving by e _|_ w_b turns w_b by e / |y - x_k|.
     d_last = (eb * dr.dot(e1, s) / db, eb * dr.dot(e2, s) / db, eb * dr.dot(e1, t) / db, eb * dr.dot(e2, t) / db)
@@ -262,9 +303,10 @@ def vertex_of(si):
             mi.Vector3f(si.dp_dv), mi.Vector3f(si.dn_du), mi.Vector3f(si.dn_dv)]
 
 
-def _oriented(i, si, d):
-    """Vertex ``i`` (0-based) is crossed in the right sense: even ones leave the shape, odd ones enter it."""
-    sign = 1.0 if i % 2 == 0 else -1.0
+def _oriented(inside, si, d):
+    """A vertex is reached from the right side: from inside the medium (``inside``) the ray meets the surface
+    along its outward normals, from outside against them."""
+    sign = 1.0 if inside else -1.0
     return (sign * dr.dot(si.n, d) > 0) & (sign * dr.dot(si.sh_frame.n, d) > 0)
 
 
@@ -279,7 +321,8 @@ def seed_chain(scene, x0, direction, k, shape_id, active):
     dist = None
     for i in range(k):
         si = scene.ray_intersect(ray, WALK_FLAGS, ok)
-        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & _oriented(i, si, direction)
+        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & _oriented(i % 2 == 0, si,
+                                                                                                 direction)
         verts.append(vertex_of(si))
         if i == 0:
             dist = mi.Float(si.t)
@@ -287,8 +330,9 @@ def seed_chain(scene, x0, direction, k, shape_id, active):
     return verts, dist, ok
 
 
-def _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, active):
-    """The tangent-plane update ``x_i - beta delta_i`` projected onto the surface, vertex after vertex."""
+def _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, active, inside):
+    """The tangent-plane update ``x_i - beta delta_i`` projected onto the surface, vertex after vertex
+    (``inside``: :func:`sides` of the chain's kinds)."""
     rel = dist * omega - beta * steps[0]
     ray = mi.Ray3f(x0, dr.normalize(rel))
     ray.maxt = 2.0 * dr.norm(rel)
@@ -303,7 +347,7 @@ def _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, active):
             ray = prev.spawn_ray_to(target)
             ray.maxt = 2.0 * dr.norm(target - prev.p)
         si = scene.ray_intersect(ray, WALK_FLAGS, ok)
-        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & _oriented(i, si, ray.d)
+        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & _oriented(inside[i], si, ray.d)
         if i == 0:
             dist_new = mi.Float(si.t)
         new.append(vertex_of(si))
@@ -314,13 +358,17 @@ def _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, active):
 
 
 @dr.syntax
-def walk_chain(scene, x0, y, verts, omega0, dist0, eta, shape_id, iterations, tolerance, active):
+def walk_chain(scene, x0, y, verts, omega0, dist0, eta, shape_id, iterations, tolerance, active, kinds=None):
     """Newton walk of a k-vertex chain from its seed (module docstring): ``(converged, verts, omega, dist)``.
+
+    ``kinds`` (default: all refractions) as in :func:`chain_blocks`.
 
     Converged when every vertex's ``|C_i|`` is below ``tolerance`` plus the light side's
     float32 floor (as the single-vertex walk of :mod:`harness.reference.mnee`).
     """
     k = len(verts)
+    kinds = kinds or alternating(k)
+    inside = sides(kinds)
     omega = mi.Vector3f(omega0)
     dist = mi.Float(dist0)
     beta = mi.Float(1.0)
@@ -328,7 +376,7 @@ def walk_chain(scene, x0, y, verts, omega0, dist0, eta, shape_id, iterations, to
     converged = mi.Bool(False)
     walking = mi.Bool(active)
     while dr.hint(walking, label="mnee chain walk"):
-        C, A, B, U, aux = chain_blocks(omega, dist, verts, y, eta)
+        C, A, B, U, aux = chain_blocks(omega, dist, verts, y, eta, kinds)
         floor = POSITION_EPS * dr.maximum(dr.max(dr.abs(verts[-1][0])), 1.0) / aux["db"][-1]
         done = walking & (residual(C) < tolerance + floor)
         converged |= done
@@ -336,7 +384,8 @@ def walk_chain(scene, x0, y, verts, omega0, dist0, eta, shape_id, iterations, to
         delta, det = solve_tridiagonal(A, B, U, C)
         walking &= dr.abs(det) > MIN_DET
         steps = [delta[i][0] * verts[i][3] + delta[i][1] * verts[i][4] for i in range(k)]
-        new, omega_new, dist_new, ok = _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, walking)
+        new, omega_new, dist_new, ok = _project(scene, x0, omega, dist, verts, steps, beta, shape_id, y, walking,
+                                                inside)
         for i in range(k):
             for j in range(7):
                 verts[i][j][ok] = new[i][j]

@@ -19,6 +19,7 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from harness.reference import mnee_chain as chain  # noqa: E402
+from harness.reference import mnee_sms as sms  # noqa: E402
 from harness.reference.mnee_vertex import (  # noqa: E402
     MIN_DET, PLANE_SWITCH, POSITION_EPS, generalized_geometry, half_vector_constraint, plane_refraction_point)
 
@@ -243,8 +244,8 @@ class ManifoldConnections(mi.SamplingIntegrator):
                      active):
         """A k-vertex chain (:mod:`harness.reference.mnee_chain`) from the straight seed, and its light at ``x0``.
 
-        Returns ``(connected, value, direction)``: ``value = I G prod(1 - F_i) prod Tr_j /
-        p_select`` (``mnee_chain`` docstring) along ``direction`` from ``x0``.
+        Returns ``(connected, value, direction, x1)``: ``value = I G prod(1 - F_i) prod Tr_j /
+        p_select`` (``mnee_chain`` docstring) along ``direction`` from ``x0``, ``x1`` its first vertex.
         """
         verts, dist, ok = chain.seed_chain(scene, x0, direction, k, shape_id, active)
         conv, verts, omega, dist = chain.walk_chain(scene, x0, y, verts, direction, dist, eta, shape_id,
@@ -261,7 +262,7 @@ class ManifoldConnections(mi.SamplingIntegrator):
             tr *= self._ratio_track(medium, verts[i][0], verts[i + 1][0], sampler, conn)
         fresnel_t = chain.chain_fresnel(verts, aux, eta)
         value = dr.select(conn, sel_weight * intensity * fresnel_t * g * tr, 0.0)
-        return conn, value, omega
+        return conn, value, omega, verts[0][0]
 
     def _connect(self, scene, sampler, mei, medium, active, depth, phase_value):
         """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
@@ -270,13 +271,14 @@ class ManifoldConnections(mi.SamplingIntegrator):
         they do not fit into ``max_depth``, an eligible vertex gets no connection of that
         length (a straight one would be blocked by the interface). ``phase_value(direction)`` is
         the phase function toward a direction (used by the probe seeds). Returns
-        ``(value, direction, pdf, stats)``: the light arriving at ``mei`` along
+        ``(value, direction, pdf, extras, stats)``: the light arriving at ``mei`` along
         ``direction`` divided by its sampling density (times the phase function gives the
-        contribution), the solid-angle pdf used for MIS (0 for delta lights), the light and
-        direction of a chain through 3, 5, ... crossings (found where the seed segment
-        crosses that many times, up to ``max_crossings``; a second, distinct path, added to
-        the first), and the :data:`STATS_AOVS` of this vertex (counts, then the lost light
-        times the phase function).
+        contribution), the solid-angle pdf used for MIS (0 for delta lights), ``extras``: a list
+        of further ``(value, direction)`` pairs, each a distinct path added to the first (the
+        chain through 3, 5, ... crossings found where the seed segment crosses that many times,
+        up to ``max_crossings``; with ``sms_trials``, the specular manifold sampling estimates of
+        :mod:`harness.reference.mnee_sms`), and the :data:`STATS_AOVS` of this vertex (counts,
+        then the lost light times the phase function).
         """
         idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
         emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
@@ -317,13 +319,27 @@ class ManifoldConnections(mi.SamplingIntegrator):
         chain_value = mi.Spectrum(0.0)
         chain_dir = mi.Vector3f(ds.d)
         chain_conn = mi.Bool(False)
+        connected = {1: (x1, converged)}          # the solutions already connected, by number of refractions
         for k in range(3, self.max_crossings + 1, 2):
             lane = manifold & same & (crossings == k) & (depth + k < self.max_depth)
-            conn_k, value_k, omega_k = self._chain_value(scene, sampler, mei.p, y, ds.d, eta, shape_id, k, emitter,
-                                                         u2, sel_weight, medium, lane)
+            conn_k, value_k, omega_k, x1_k = self._chain_value(scene, sampler, mei.p, y, ds.d, eta, shape_id, k,
+                                                               emitter, u2, sel_weight, medium, lane)
+            connected[k] = (x1_k, conn_k)
             chain_value[conn_k] = value_k
             chain_dir[conn_k] = omega_k
             chain_conn |= conn_k
+        extras = [(chain_value, chain_dir)]
+        # ---- specular manifold sampling: further refraction solutions and chains with a reflection
+        sms_found, sms_capped = mi.Bool(False), mi.Bool(False)
+        if self.sms_trials:
+            for kinds in self.sms_chains:
+                lane = manifold & (depth + len(kinds) < self.max_depth)
+                exclude = connected.get(len(kinds)) if set(kinds) == {"T"} else None
+                v, d, found, capped = sms.sampled_value(self, scene, sampler, mei.p, y, kinds, eta, shape_id, emitter,
+                                                        u2, sel_weight, medium, self.sms_trials, lane, exclude)
+                extras.append((v, d))
+                sms_found |= found
+                sms_capped |= capped
         stats = []
         if self.stats:
             # Not made although the path's length allows it: over max_crossings, another shape on
@@ -336,10 +352,12 @@ class ManifoldConnections(mi.SamplingIntegrator):
                      + [dr.select(manifold & b, 1.0, 0.0) for b in bins]
                      + [dr.select(chain_conn, 1.0, 0.0), dr.select(lost, 1.0, 0.0), dr.select(over, 1.0, 0.0)]
                      + [lost_light[0], lost_light[1], lost_light[2]])
+            if self.sms_trials:
+                stats += [dr.select(sms_found, 1.0, 0.0), dr.select(sms_capped, 1.0, 0.0)]
         if self.probe_seeds:
             stats += self._probe(scene, sampler, mei.p, y, ds.d, eta, emitter, u2, sel_weight, medium, manifold,
                                  conn, x1, phase_value)
-        return value, direction, pdf, (chain_value, chain_dir), stats
+        return value, direction, pdf, extras, stats
 
     def _probe(self, scene, sampler, x0, y, to_light, eta, emitter, u2, sel_weight, medium, active, conn, x1,
                phase_value):

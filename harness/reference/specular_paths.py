@@ -24,8 +24,9 @@ sequence of boundary events since the light (``E`` enter, ``T`` leave, ``R`` ref
 * ``direct``: ``E``, one refraction: what the single manifold walk connects;
 * ``chain3``, ``chain5``, ...: ``ETE``, ``ETETE``, ...: through another part of the object,
   what the chains of :mod:`harness.reference.mnee_chain` connect (up to ``max_crossings``);
-* ``reflection``: any reflection on the way (``ER``, ``rE``, ``ETRE`` ...): what no manifold
-  connection of ``mneevolpath`` makes.
+* ``reflection``: any reflection on the way (``ER``, ``rE``, ``ETRE`` ...): what no straight-seeded
+  connection of ``mneevolpath`` makes (specular manifold sampling makes the chains it names,
+  :mod:`harness.reference.mnee_sms`; ``by_label`` holds each label's power to hold against them).
 
 The share of the first-scattered power in ``reflection`` (:func:`shares`) is the measured
 estimate of the light that the reference loses to specular chains with a reflection vertex

@@ -24,7 +24,7 @@ import numpy as np
 from harness import paths
 from harness.errors import InputError
 from harness.scene.geometry import Mesh
-from harness.scene.model import MAX_CROSSINGS_DEFAULT, SceneFile
+from harness.scene.model import MAX_CROSSINGS_DEFAULT, SMS_CHAINS_DEFAULT, SceneFile
 from harness.validation import read_toml, validate
 
 SUITE_DIR = paths.SUITE_DIR
@@ -52,6 +52,8 @@ class Boundary:
     eta: float = 1.0
     roughness: float = 0.0
     max_crossings: int = MAX_CROSSINGS_DEFAULT
+    sms_trials: int = 0
+    sms_chains: str = SMS_CHAINS_DEFAULT
 
     @property
     def index_matched(self):
@@ -100,11 +102,15 @@ class Scene:
 
 
 def _boundary_key(boundary):
-    """The boundary's fields for the hash; ``max_crossings`` only where it is not the default, so that the
-    content hash of every scene written before the field existed stays the same."""
+    """The boundary's fields for the hash; ``max_crossings`` only where it is not the default and the
+    sampling fields only where it is on, so that the content hash of every scene written before the fields
+    existed stays the same."""
     key = dataclasses.asdict(boundary)
     if key.get("max_crossings") == MAX_CROSSINGS_DEFAULT:
         del key["max_crossings"]
+    if key.get("sms_trials") == 0:                    # off: the chains it would sample do not matter
+        del key["sms_trials"]
+        key.pop("sms_chains", None)
     return key
 
 
@@ -180,7 +186,9 @@ def scene_from_model(spec, path):
     b = spec.boundary
     boundary = Boundary(b.kind) if b.kind == "index-matched" else Boundary(b.kind, eta=float(b.eta),
                                                                           roughness=float(b.roughness),
-                                                                          max_crossings=int(b.max_crossings))
+                                                                          max_crossings=int(b.max_crossings),
+                                                                          sms_trials=int(b.sms_trials),
+                                                                          sms_chains=str(b.sms_chains))
     medium = Medium(np.asarray(spec.medium.bbox_min, dtype=np.float64), np.asarray(spec.medium.bbox_max,
                                                                                     dtype=np.float64),
                     **spec.medium.grids)

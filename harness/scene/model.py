@@ -86,6 +86,12 @@ class IndexMatchedBoundary(InputModel):
 MAX_CROSSINGS_DEFAULT = 5
 MAX_CROSSINGS_LIMIT = 9
 
+#: ``[boundary] sms_trials`` and ``sms_chains``: specular manifold sampling of the connections a straight
+#: seed misses (:mod:`harness.reference.mnee_sms`): the cap on the Bernoulli trials of one solution's
+#: weight (0: off), its limit, and the chains sampled by default.
+SMS_TRIALS_LIMIT = 1024
+SMS_CHAINS_DEFAULT = "T,RT,Tr,TTT"
+
 #: Relative index of refraction (inside / outside) a dielectric boundary may have: above 1
 #: (1 is index-matched; a medium less dense than its surroundings is not supported) up to 3.
 ETA_RANGE = (1.0, 3.0)
@@ -112,6 +118,24 @@ def dielectric_rules(eta, roughness):
                            "are not supported")
 
 
+def chains_rule(text):
+    """``sms_chains`` names chains of T, R and r that start inside the medium and end outside it."""
+    words = [w.strip() for w in str(text).split(",") if w.strip()]
+    if not words:
+        raise FieldProblem("sms_chains", "names no chain", 'give e.g. "T,RT,Tr,TTT"')
+    for word in words:
+        inside = True
+        for kind in word:
+            if kind not in "TRr" or (kind == "R" and not inside) or (kind == "r" and inside):
+                raise FieldProblem("sms_chains", f"{word!r}: {kind!r} cannot follow a segment "
+                                   f"{'inside' if inside else 'outside'} the medium",
+                                   "use T (a refraction), R (a reflection inside) or r (a reflection outside)")
+            inside = inside != (kind == "T")
+        if inside:
+            raise FieldProblem("sms_chains", f"{word!r} ends inside the medium", "end each chain outside, "
+                               "toward the light (an odd number of T)")
+
+
 class DielectricBoundary(InputModel):
     """A dielectric interface of relative index ``eta``: smooth (``roughness = 0``: the exact
     reference, ``mneevolpath``) or rough (GGX alpha > 0: the reference approximates with
@@ -126,10 +150,20 @@ class DielectricBoundary(InputModel):
         "vertex to a point light follows (1, 3, 5, ...; a light path that leaves the object and passes through "
         f"another part of it crosses 3 times), 1 to {MAX_CROSSINGS_LIMIT}; longer ones are counted and their light "
         "estimated in reference.json", examples=[5])
+    sms_trials: Annotated[int, Field(ge=0, le=SMS_TRIALS_LIMIT)] = Field(
+        0, description="smooth interface: specular manifold sampling of the connections the straight seed misses "
+        "(further solutions of a refraction, chains with a reflection at the boundary): the most Bernoulli trials "
+        f"that weigh one solution, 0 (off) to {SMS_TRIALS_LIMIT}; 256 or more keeps the cap's bias small",
+        examples=[256])
+    sms_chains: str = Field(
+        SMS_CHAINS_DEFAULT, description="with sms_trials: the chains sampled, from the medium vertex to the light, "
+        "comma-separated: T a refraction, R a reflection inside, r a reflection off the outside (e.g. RT: the light "
+        "enters, reflects inside, scatters)", examples=[SMS_CHAINS_DEFAULT])
 
     @model_validator(mode="after")
     def _supported(self):
         dielectric_rules(self.eta, self.roughness)
+        chains_rule(self.sms_chains)
         return self
 
 

@@ -1,0 +1,199 @@
+r"""Specular manifold sampling: the connections a straight seed does not lead to, estimated without bias.
+
+``mneevolpath`` (:mod:`harness.reference.mnee`) connects a medium vertex ``x0`` to a point light
+``y`` through the solution its straight seed leads to (one refraction, or a chain of refractions
+through other parts of the object). Two kinds of specular paths are left out
+(:mod:`harness.reference.losses` measures them): *further solutions* of the same constraint (a
+curved or faceted boundary can refract the light toward ``x0`` at several points; the seed finds one)
+and paths with a *reflection* at the boundary. This module adds both with Zeltner, Georgiev and
+Jakob's specular manifold sampling ("Specular Manifold Sampling for Rendering High-Frequency
+Caustics and Glints", SIGGRAPH 2020, Sec. 4-5):
+
+1. **Random seed.** A direction ``d`` uniform on the sphere around ``x0``; the seed path follows it
+   specularly through the vertex kinds of the chain (``T`` a refraction, ``R`` a reflection inside
+   the medium, ``r`` a reflection off the outside; :data:`harness.reference.mnee_chain.KINDS`):
+   reflect or refract at each boundary hit (total internal reflection ends a ``T`` seed).
+2. **Newton walk** on the chain's constraint from that seed (:func:`harness.reference.mnee_chain.walk_chain`
+   with the kinds: the half vector with the indices of both sides, so a reflection has the same
+   index on both), to a solution ``X`` whose every vertex is reflected or refracted on the side its
+   kind says (:func:`sided`).
+3. **Its light** ``f(X) = I G prod(F or 1 - F) prod Tr`` (the chain's generalized geometry term,
+   Hanika et al. 2015 Eq. 8 with the typed blocks; Fresnel reflectance at a reflection, transmittance at a
+   refraction; ratio-tracked transmittance along the segments inside the medium; the air segments
+   unoccluded), as for the straight-seeded chains.
+4. **Unbiased weight** (Zeltner et al. Sec. 5, Eq. 11): the seed leads to ``X`` with an unknown
+   probability ``p(X)``; Bernoulli trials (new seeds and walks) until a walk ends at ``X`` again
+   take ``N`` trials with ``E[N] = 1 / p(X)``, so ``f(X) N`` estimates ``f(X) / p(X)`` and the sum
+   over the solutions is ``E[f(X) N] = sum_X f(X)``. ``N`` is capped at ``max_trials`` (Zeltner et
+   al.'s biased variant: ``E[min(N, M)] = (1 - (1 - p)^M) / p``); the lanes that reach the cap are
+   counted.
+
+For the single refraction the solution the straight seed leads to is already connected
+(:mod:`harness.reference.mnee`), so a random walk that ends there contributes nothing (``exclude``):
+the sum runs over the *other* solutions.
+
+Chains sampled by default (``sms_chains = "T,RT,Tr,TTT"``; ``x0`` first, the light last): ``T``
+(further single-refraction solutions), ``RT`` (the light enters, reflects inside, scatters: the photon
+label ``ER`` of :mod:`harness.reference.specular_paths`), ``Tr`` (the light reflects off another part of
+the object, enters, scatters: ``rE``) and ``TTT`` (further solutions through another part: ``ETE``;
+the straight-seeded chain's own solution is excluded as the single refraction's is). Any chain of
+``T``, ``R`` and ``r`` that starts inside and ends outside may be named (``RRT``: ``ERR``). Limits:
+chains not named (``ETRE``, ``ERRR`` ...) stay counted as losses by :mod:`harness.reference.losses`; the cap biases toward darker
+where ``p(X) < 1 / max_trials`` (the capped share is reported); two solutions closer than
+:data:`SAME` of the scene's scale count as one; each lane pays the trials of the solution it
+found, so the cost grows with the number of solutions.
+"""
+
+from harness.reference.llvm import ensure_libllvm
+
+try:  # must precede ``import mitsuba`` (as in harness.reference.mnee)
+    ensure_libllvm()
+except RuntimeError:
+    pass
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+from harness.reference import mnee_chain as chain  # noqa: E402
+
+#: The chains sampled by default (``sms_chains``), from ``x0``: further single refractions, a reflection
+#: inside, a reflection off the outside, further chains through three crossings; and the most Bernoulli
+#: trials of one solution's weight that ``sms_trials`` (Zeltner et al.'s cap M) may ask for.
+from harness.scene.model import SMS_CHAINS_DEFAULT, SMS_TRIALS_LIMIT as MAX_TRIALS_LIMIT  # noqa: E402, F401
+#: Two solutions are the same when every vertex lies within this fraction of ``max(|x|, 1)``.
+SAME = 1e-3
+
+
+def parse_chains(text):
+    """``"T,RT,Tr"`` -> ``(("T",), ("R", "T"), ("T", "r"))``; a chain the kinds do not allow raises one line."""
+    out = []
+    for word in (w.strip() for w in text.split(",")):
+        if not word:
+            continue
+        kinds = tuple(word)
+        try:
+            chain.sides(kinds)
+        except ValueError as exc:
+            raise ValueError(f"mneevolpath: sms_chains: {word!r}: {exc}") from None
+        out.append(kinds)
+    if not out:
+        raise ValueError(f"mneevolpath: sms_chains = {text!r} names no chain; give e.g. 'T,RT,Tr'")
+    return tuple(out)
+
+
+def seed_path(scene, x0, d, kinds, eta, shape_id, active):
+    """The specular path from ``x0`` along ``d`` through ``kinds``: ``(verts, dist, ok)`` (step 1)."""
+    inside = chain.sides(kinds)
+    ray = mi.Ray3f(x0, d)
+    ok = mi.Bool(active)
+    verts, dist = [], None
+    for i, kind in enumerate(kinds):
+        si = scene.ray_intersect(ray, chain.WALK_FLAGS, ok)
+        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & chain._oriented(
+            inside[i], si, ray.d)
+        verts.append(chain.vertex_of(si))
+        if i == 0:
+            dist = mi.Float(si.t)
+        n = si.sh_frame.n
+        wi = -ray.d
+        if kind == "T":
+            # from inside the relative index is eta -> 1: sin_t = eta sin_i, about the normal facing wi
+            r = eta if inside[i] else 1.0 / eta
+            nn = -n if inside[i] else n
+            c = dr.dot(nn, wi)
+            k2 = 1.0 - dr.square(r) * (1.0 - dr.square(c))
+            ok &= k2 > 0.0
+            new = dr.normalize(-r * wi + (r * c - dr.sqrt(dr.maximum(k2, 0.0))) * nn)
+        else:
+            new = 2.0 * dr.dot(n, wi) * n - wi
+        ray = si.spawn_ray(new)
+    return verts, dist, ok
+
+
+def sided(kinds, verts, aux):
+    """Every vertex bends the light the way its kind says: a refraction has its two directions on the
+    two sides of both normals, a reflection both on the side of its segment (inside for ``R``)."""
+    ok = mi.Bool(True)
+    for i, (kind, inside) in enumerate(zip(kinds, chain.sides(kinds))):
+        _, n, ng = verts[i][0], verts[i][1], verts[i][2]
+        wa, wb = aux["wa"][i], aux["wb"][i]
+        for nrm in (n, ng):
+            a, b = dr.dot(nrm, wa), dr.dot(nrm, wb)
+            ok &= (a < 0) if inside else (a > 0)
+            ok &= (a * b < 0) if kind == "T" else (a * b > 0)
+    return ok
+
+
+def typed_fresnel(kinds, verts, aux, eta):
+    """``prod_i`` of the Fresnel reflectance at a reflection and ``1 - F`` at a refraction (unpolarised)."""
+    f = mi.Float(1.0)
+    for i, (kind, inside) in enumerate(zip(kinds, chain.sides(kinds))):
+        n = verts[i][1]
+        if kind == "T":
+            w_air = aux["wb"][i] if inside else aux["wa"][i]
+            fr, _, _, _ = mi.fresnel(dr.abs(dr.dot(n, w_air)), eta)
+            f *= 1.0 - fr
+        else:
+            cos = dr.abs(dr.dot(n, aux["wa"][i]))
+            fr, _, _, _ = mi.fresnel(-cos if inside else cos, eta)   # from inside: total reflection included
+            f *= fr
+    return f
+
+
+def _same(verts, ref):
+    ok = mi.Bool(True)
+    for v, r in zip(verts, ref):
+        ok &= dr.norm(v[0] - r) <= SAME * dr.maximum(dr.max(dr.abs(r)), 1.0)
+    return ok
+
+
+def _walk_from(integ, scene, sampler, x0, y, kinds, eta, shape_id, active):
+    """A random seed (step 1) and its walk (step 2): ``(converged, verts, omega, dist)``."""
+    d = mi.warp.square_to_uniform_sphere(sampler.next_2d(active))
+    verts, dist, ok = seed_path(scene, x0, d, kinds, eta, shape_id, active)
+    return chain.walk_chain(scene, x0, y, verts, d, dist, eta, shape_id, integ.newton_iterations,
+                            integ.newton_tolerance, ok, kinds)
+
+
+@dr.syntax
+def _trials(integ, scene, sampler, x0, y, kinds, eta, shape_id, ref, max_trials, active):
+    """Bernoulli trials until a walk ends at ``ref`` again (step 4): ``(N, capped)``."""
+    n = mi.UInt32(0)
+    going = mi.Bool(active)
+    found = mi.Bool(False)
+    while dr.hint(going, label="sms trials"):
+        n[going] += 1
+        conv, verts, _, _ = _walk_from(integ, scene, sampler, x0, y, kinds, eta, shape_id, going)
+        hit = going & conv & _same(verts, ref)
+        found |= hit
+        going &= ~hit & (n < max_trials)
+    return n, active & ~found
+
+
+def sampled_value(integ, scene, sampler, x0, y, kinds, eta, shape_id, emitter, u2, sel_weight, medium, max_trials,
+                  active, exclude=None):
+    """One specular-manifold-sampling estimate of the light of every ``kinds`` chain at ``x0``.
+
+    Returns ``(value, direction, found, capped)``: ``value = f(X) N / p_select`` along ``direction``
+    (module docstring), ``found`` where a walk ended at an admissible solution, ``capped`` where its
+    trials reached ``max_trials``. ``exclude = (x1, mask)``: a solution already connected (the straight
+    seed's single refraction), which contributes nothing here.
+    """
+    conv, verts, omega, dist = _walk_from(integ, scene, sampler, x0, y, kinds, eta, shape_id, active)
+    g, _, aux = chain.chain_geometry(omega, dist, verts, y, eta, kinds)
+    conn = conv & (g > 0) & sided(kinds, verts, aux)
+    if exclude is not None:
+        conn &= ~(exclude[1] & _same(verts[:1], [exclude[0]]))
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.n, it.t = verts[-1][0], verts[-1][2], 0.0
+    conn &= ~scene.ray_test(it.spawn_ray_to(y), conn)        # the last air segment (the others: the walk's casts)
+    ds1, em1 = emitter.sample_direction(it, u2, conn)
+    intensity = em1 * dr.square(ds1.dist)
+    tr = integ._ratio_track(medium, x0, verts[0][0], sampler, conn)
+    for i, inside in enumerate(chain.sides(kinds)[1:], start=1):
+        if inside:                                             # the segment into vertex i runs in the medium
+            tr *= integ._ratio_track(medium, verts[i - 1][0], verts[i][0], sampler, conn)
+    f = sel_weight * intensity * typed_fresnel(kinds, verts, aux, eta) * g * tr
+    n, capped = _trials(integ, scene, sampler, x0, y, kinds, eta, shape_id, [v[0] for v in verts], max_trials, conn)
+    value = dr.select(conn, f * mi.Float(n), 0.0)
+    return value, omega, conn, capped
