@@ -301,6 +301,51 @@ class TestReporting:
         exact, note = losses.verdict(found, 0.04)
         assert exact, note
 
+    def test_verdict_decides_only_beyond_two_standard_errors(self):
+        """A first-scatter shortfall is exact only 2 SE below the limit, not exact 2 SE above it, else undecided
+        (and not exact)."""
+        from harness.reference import losses
+
+        limit = losses.LOSS_FRACTION_OF_TARGET * 0.04
+        found = self.losses(0.0)
+
+        def judged(missed, se):
+            found["first_scatter"] = {"missed_share": [missed, 0.0, 0.0], "missed_share_se": [se, 0.0, 0.0],
+                                      "reflection_share": [0.0, 0.0, 0.0], "points": 1 << 20}
+            return losses.verdict(found, 0.04)
+
+        assert judged(0.5 * limit, 0.2 * limit)[0]
+        exact, note = judged(0.9 * limit, 0.1 * limit)
+        assert not exact and "undecided" in note and "1048576 points" in note, note
+        exact, note = judged(1.5 * limit, 0.1 * limit)
+        assert not exact and "undecided" not in note and "±" in note, note
+
+    def test_first_scatter_adds_points_until_the_limit_can_be_decided(self, monkeypatch):
+        """Batches of delivered power are pooled until the missed share's SE is at most a quarter of the limit."""
+        from harness.reference import connection_power, losses, specular_paths
+
+        traced = {"by_class": {"direct": np.array([2.0, 2.0, 2.0])}, "by_label": {"E": np.array([2.0, 2.0, 2.0])}}
+        monkeypatch.setattr(specular_paths, "trace", lambda *a, **k: traced)
+        calls = []
+
+        def fake(scene, points, seed, variant):
+            calls.append(seed)
+            return np.full(3, 1.96 + 0.01 * len(calls)), np.full(3, 0.039), 0.5
+
+        monkeypatch.setattr(connection_power, "delivered", fake)
+        scene = type("S", (), {"boundary": Boundary("dielectric", 1.4, 0.0)})()
+        fs = losses.first_scatter(scene, points=1000, limit=0.02, max_points=10 ** 6)
+        # SE of one batch: 0.039 / 2 = 0.0195; n batches: 0.0195 / sqrt(n) <= 0.005 from n = 16
+        assert len(calls) == 16 and calls == list(range(16)) and fs["points"] == 16000
+        assert fs["missed_share_se"][0] == pytest.approx(0.0195 / 4)
+        assert fs["missed_share"][0] == pytest.approx(1 - np.mean([1.96 + 0.01 * k for k in range(1, 17)]) / 2)
+        calls.clear()
+        losses.first_scatter(scene, points=1000, limit=0.02, max_points=4000)
+        assert len(calls) == 4                                           # the cap on points
+        calls.clear()
+        losses.first_scatter(scene, points=1000)
+        assert len(calls) == 1                                           # no limit: one batch
+
     def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
         import json
 

@@ -67,9 +67,14 @@ ALLOW_ENV = "SSLPV_ALLOW_INEXACT_REFERENCE"
 BINS = ("1", "3", "5", ">=7")
 TRACE_PHOTONS = 1 << 16
 DELIVERED_POINTS = 1 << 18
+#: The delivered power is measured in batches of DELIVERED_POINTS until its standard error is at most a
+#: quarter of the limit it is judged against, or until this many points.
+MAX_DELIVERED_POINTS = 1 << 22
+#: A loss is decided when it lies this many standard errors below (exact) or above (not exact) the limit.
+DECIDED_SE = 2.0
 
 
-def measure(scene, variant="llvm_ad_rgb", spp=LOSS_SPP, seeds=LOSS_SEEDS, seed_base=7_000_000):
+def measure(scene, variant="llvm_ad_rgb", spp=LOSS_SPP, seeds=LOSS_SEEDS, seed_base=7_000_000, limit=None):
     """Per-channel shares of the connections and the estimated lost light of ``scene`` (module docstring)."""
     from harness.reference import mitsuba_scene as ms
     from harness.reference.mnee import STATS_AOVS
@@ -105,23 +110,33 @@ def measure(scene, variant="llvm_ad_rgb", spp=LOSS_SPP, seeds=LOSS_SEEDS, seed_b
                 "lost_image_share_se": float(ratio.std(ddof=1) / np.sqrt(len(ratio))) if len(ratio) > 1 else None,
             }
     return {"spp": spp, "seeds": seeds, "max_crossings": int(scene.boundary.max_crossings), "channels": out,
-            "first_scatter": first_scatter(scene, variant)}
+            "first_scatter": first_scatter(scene, variant, limit=limit)}
 
 
-def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DELIVERED_POINTS, seed=0):
+def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DELIVERED_POINTS, seed=0, limit=None,
+                  max_points=MAX_DELIVERED_POINTS):
     """The first-scattered power traced through every specular path against what the connections deliver.
 
     Returns per channel (lists of 3): ``traced`` by class, ``delivered`` and its ``delivered_se``,
     ``missed_share = 1 - delivered / traced`` with ``missed_share_se``, and the ``reflection_share``
-    and ``chains_over_max_share`` of the traced power (module docstring).
+    and ``chains_over_max_share`` of the traced power (module docstring). With ``limit`` (the share
+    the loss is judged against), batches of ``points`` are added (new seeds, pooled) until the
+    largest ``missed_share_se`` is at most ``limit / 4`` or ``max_points`` points were drawn, so that
+    :func:`verdict` can decide.
     """
     from harness.reference import connection_power, specular_paths
 
     traced = specular_paths.trace(scene, photons=photons, seed=seed)
     part = specular_paths.shares(traced, int(scene.boundary.max_crossings))
     total = part["total"]
-    got, se, _ = connection_power.delivered(scene, points=points, seed=seed, variant=variant)
     safe = np.where(total > 0, total, 1.0)
+    batches = [connection_power.delivered(scene, points=points, seed=seed, variant=variant)[:2]]
+    while (limit is not None and len(batches) * points < max_points
+           and np.max(np.sqrt(sum(s ** 2 for _, s in batches)) / len(batches) / safe) > limit / 4):
+        batches.append(connection_power.delivered(scene, points=points, seed=seed + len(batches), variant=variant)[:2])
+    got = sum(g for g, _ in batches) / len(batches)
+    se = np.sqrt(sum(s ** 2 for _, s in batches)) / len(batches)
+    points = points * len(batches)
     return {"photons": photons, "points": points,
             "traced": {k: v.tolist() for k, v in traced["by_class"].items()},
             "delivered": got.tolist(), "delivered_se": se.tolist(),
@@ -141,18 +156,40 @@ def channel_loss(losses, name):
     return ch["lost_image_share"], "image light of the connections not made"
 
 
-def verdict(losses, target_rel_se):
-    """``(exact, reason)``: exact when every channel's lost image share is <= LOSS_FRACTION_OF_TARGET x target."""
-    limit = LOSS_FRACTION_OF_TARGET * float(target_rel_se)
-    name = max(losses["channels"], key=lambda c: channel_loss(losses, c)[0])
-    ch = losses["channels"][name]
+def _decided(losses, name, limit):
+    """``(loss, se)`` of a channel as judged: the first-scattered light missed with its standard error where it
+    is the larger loss, else the lost image share (whose light estimate has no bias toward exact)."""
     loss, which = channel_loss(losses, name)
     fs = losses.get("first_scatter")
+    if fs and which.startswith("first-scattered") and "missed_share_se" in fs:
+        return loss, float(fs["missed_share_se"]["RGB".index(name)])
+    return loss, 0.0
+
+
+def verdict(losses, target_rel_se):
+    """``(exact, reason)``: exact when every channel's loss is at most LOSS_FRACTION_OF_TARGET x target by
+    :data:`DECIDED_SE` standard errors of its measurement; a loss within that band of the limit is undecided
+    and judged not exact (the reason says so)."""
+    limit = LOSS_FRACTION_OF_TARGET * float(target_rel_se)
+    def upper(c):
+        loss, se = _decided(losses, c, limit)
+        return loss + DECIDED_SE * se
+
+    name = max(losses["channels"], key=upper)
+    ch = losses["channels"][name]
+    loss, which = channel_loss(losses, name)
+    _, se = _decided(losses, name, limit)
+    fs = losses.get("first_scatter")
     refl = f", {fs['reflection_share']['RGB'.index(name)]:.2%} of it through reflections" if fs else ""
-    if loss <= limit:
-        return True, (f"exact: the connections miss an estimated {loss:.2%} ({which}, channel {name}), at most "
+    pm = f" ± {se:.2%}" if se else ""
+    if loss + DECIDED_SE * se <= limit:
+        return True, (f"exact: the connections miss an estimated {loss:.2%}{pm} ({which}, channel {name}), at most "
                       f"{LOSS_FRACTION_OF_TARGET:g} x the noise target ({limit:.2%})")
-    return False, (f"not exact: the connections miss an estimated {loss:.2%} ({which}, channel {name}{refl}; "
+    if loss - DECIDED_SE * se <= limit:
+        return False, (f"not exact (undecided): the connections miss an estimated {loss:.2%}{pm} ({which}, channel "
+                       f"{name}{refl}), within {DECIDED_SE:g} standard errors of {LOSS_FRACTION_OF_TARGET:g} x the "
+                       f"noise target ({limit:.2%}) after {fs['points'] if fs else 0} points")
+    return False, (f"not exact: the connections miss an estimated {loss:.2%}{pm} ({which}, channel {name}{refl}; "
                    f"connections not made {ch['lost']:.2%}, {ch['over_max']:.2%} over max_crossings = "
                    f"{losses['max_crossings']}), more than {LOSS_FRACTION_OF_TARGET:g} x the noise target "
                    f"({limit:.2%})")

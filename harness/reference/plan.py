@@ -443,7 +443,8 @@ class ReferencePlan:
             # whose lost light exceeds its share of the noise target says so and is not judged against.
             from harness.reference import losses
 
-            found = losses.measure(self.scene, self.setup.variant)
+            found = losses.measure(self.scene, self.setup.variant,
+                                   limit=losses.LOSS_FRACTION_OF_TARGET * float(self.target))
             exact, note = losses.verdict(found, self.target)
             meta.update(mnee_losses=found, exact=exact, exact_note=note)
         with atomic_dir(self.out_dir) as tmp:
