@@ -120,8 +120,9 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
     Returns per channel (lists of 3): ``traced`` by class, ``delivered`` and its ``delivered_se``,
     ``missed_share = 1 - delivered / traced`` with ``missed_share_se``, and the ``reflection_share``
     and ``chains_over_max_share`` of the traced power (module docstring). With ``limit`` (the share
-    the loss is judged against), batches of ``points`` are added (new seeds, pooled) until the
-    largest ``missed_share_se`` is at most ``limit / 4`` or ``max_points`` points were drawn, so that
+    the loss is judged against), batches of ``points`` are added (new seeds, pooled) while a channel's
+    missed share lies within :data:`DECIDED_SE` standard errors of the limit, until the largest
+    ``missed_share_se`` is at most ``limit / 4`` or ``max_points`` points were drawn, so that
     :func:`verdict` can decide.
     """
     from harness.reference import connection_power, specular_paths
@@ -131,11 +132,19 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
     total = part["total"]
     safe = np.where(total > 0, total, 1.0)
     batches = [connection_power.delivered(scene, points=points, seed=seed, variant=variant)[:2]]
-    while (limit is not None and len(batches) * points < max_points
-           and np.max(np.sqrt(sum(s ** 2 for _, s in batches)) / len(batches) / safe) > limit / 4):
+
+    def pooled():
+        return sum(g for g, _ in batches) / len(batches), np.sqrt(sum(s ** 2 for _, s in batches)) / len(batches)
+
+    def undecided():
+        got, se = pooled()
+        missed, m_se = np.where(total > 0, 1.0 - got / safe, 0.0), se / safe
+        open_ = (missed - DECIDED_SE * m_se <= limit) & (missed + DECIDED_SE * m_se > limit)
+        return bool(np.any(open_)) and float(np.max(m_se)) > limit / 4
+
+    while limit is not None and len(batches) * points < max_points and undecided():
         batches.append(connection_power.delivered(scene, points=points, seed=seed + len(batches), variant=variant)[:2])
-    got = sum(g for g, _ in batches) / len(batches)
-    se = np.sqrt(sum(s ** 2 for _, s in batches)) / len(batches)
+    got, se = pooled()
     points = points * len(batches)
     return {"photons": photons, "points": points,
             "traced": {k: v.tolist() for k, v in traced["by_class"].items()},
