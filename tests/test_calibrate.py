@@ -146,6 +146,11 @@ class TestBadInput:
         (["--family", "diffusion", "--steps", "auto"], "--steps: steps: 'auto' is not a budget"),
         (["--family", "diffusion", "--steps", "8,8"], "--steps: steps: a budget appears twice"),
         (["--family", "diffusion", "--outside", "space"], "--outside: outside: unknown outside 'space'"),
+        (["--family", "collision", "--boundary-reflect", "mirror"],
+         "--boundary-reflect: boundary_reflect: unknown boundary_reflect 'mirror'"),
+        (["--family", "collision", "--phase-scaling", "foo"], "--phase-scaling: phase_scaling: unknown phase_scaling"),
+        (["--family", "collision", "--boundary-reflect", "rdr", "--outside", "extrapolated"],
+         "--boundary-reflect: boundary_reflect:"),
         (["--family", "diffusion", "--skip", "x"], "--skip: skip:"),
         (["--family", "diffusion", "--scenes", "thin_ring"], "--scenes: scenes: 1 scene given"),
         (["--family", "diffusion", "--scenes", "thin_ring,nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
@@ -159,6 +164,20 @@ class TestBadInput:
         assert code == 2 and len(err) == 1, err
         assert err[0].startswith("error: " + where), err[0]
         assert not out.exists() and list(tmp_path.iterdir()) == []
+
+    @pytest.mark.parametrize("argv, where", [
+        (["--from", "NOWHERE"], "--from: folder: NOWHERE holds no calibration.json"),
+        (["--from", "baselines/calibrated/collision", "--against", "NOWHERE"],
+         "--against: folder: NOWHERE holds no calibration.json"),
+    ])
+    def test_form_one_line_and_nothing_written(self, tmp_path, capsys, argv, where):
+        out = tmp_path / "out"
+        code = main(["calibrate-form", "--out", str(out)] + [str(a).replace("NOWHERE", str(tmp_path / "x"))
+                                                             for a in argv])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, err
+        assert err[0].startswith("error: " + where.replace("NOWHERE", str(tmp_path / "x"))), err[0]
+        assert not out.exists()
 
     def test_a_foreign_folder_is_refused_before_any_render(self, tmp_path, capsys, monkeypatch):
         import harness.calibration.scan as scan

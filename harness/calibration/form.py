@@ -1,6 +1,6 @@
 """A calibration that depends on the material: fit the form (F1) over the suite, validate it by renders.
 
-``python -m harness.calibration.form --from DIR... --out OUT`` reads calibrations of one family
+``sslpv-harness calibrate-form --from DIR... --out OUT`` (or ``python -m harness.calibration.form``) reads calibrations of one family
 (each ``DIR``: ``calibrated.toml`` and ``calibration.json`` of ``sslpv-harness calibrate``, e.g. one
 per grid; their budgets are taken together) and
 
@@ -191,7 +191,8 @@ def _sources(paths):
     return merged, settings
 
 
-def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print):
+def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
+             command="python -m harness.calibration.form"):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
     family whose budgets are taken together; module docstring) -> the report dict."""
     from harness.io.atomic import _check_replaceable, atomic_dir
@@ -241,7 +242,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 "anchored": anchored, "scenes": names,
                 "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     if argv:
-        fit_info["command"] = "python -m harness.calibration.form " + " ".join(argv)
+        fit_info["command"] = command + " " + " ".join(argv)
 
     def toml_for(held):
         rows = [(N, k, fits[budget_label(N, k)]["terms"], fits[budget_label(N, k)]["folds"][held]["sigma"],

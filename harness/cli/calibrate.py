@@ -27,6 +27,11 @@ def configure(sp):
                     "accumulated, in [0, steps] (default: the family's)")
     sp.add_argument("--outside", metavar="OUTSIDE", help="renderer setting of the fit: vacuum | material | absorb | "
                     "extrapolated | interior (default: the family's)")
+    sp.add_argument("--boundary-reflect", dest="boundary_reflect", metavar="MODE", help="renderer setting of the "
+                    "fit, an extension: none | rdr (R_dr of the light reaching the surface returns into the medium; "
+                    "default: the family's, none)")
+    sp.add_argument("--phase-scaling", dest="phase_scaling", metavar="MODE", help="renderer setting of the fit, an "
+                    "extension: none | delta-eddington (default: the family's, none)")
     add_progress(sp)
 
 
@@ -56,8 +61,9 @@ def run(args):
     settings = {}
     if args.skip is not None:
         settings["skip"] = _numbers("--skip", args.skip, int)[0]
-    if args.outside is not None:
-        settings["outside"] = args.outside
+    for key in ("outside", "boundary_reflect", "phase_scaling"):
+        if getattr(args, key) is not None:
+            settings[key] = getattr(args, key)
     rng = None
     if args.sigma_range is not None:
         rng = _numbers("--sigma-range", args.sigma_range, float)

@@ -15,7 +15,8 @@ import json
 import re
 import sys
 
-from harness.cli import baselines, calibrate, compare, export, nightly, reference, render, report, scenes, study, sweep
+from harness.cli import (baselines, calibrate, calibrate_form, compare, export, nightly, reference, render, report,
+                         scenes, study, sweep)
 from harness.cli.options import add_json
 from harness.errors import EnvironmentProblem, InputError, ResultRefused
 
@@ -23,7 +24,7 @@ from harness.errors import EnvironmentProblem, InputError, ResultRefused
 COMMANDS = [
     ("scenes", scenes), ("reference", reference), ("render", render), ("compare", compare),
     ("sweep", sweep), ("report", report), ("export", export), ("nightly", nightly), ("baselines", baselines),
-    ("calibrate", calibrate), ("study", study),
+    ("calibrate", calibrate), ("calibrate-form", calibrate_form), ("study", study),
 ]
 
 

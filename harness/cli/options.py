@@ -51,6 +51,9 @@ VOCABULARY = {
     "--family": "a mapping family", "--sigma-range": "the scanned sigma_scale range",
     "--points": "the scanned sigma_scale values",
     "--into": "write elsewhere than the committed place",
+    "--from": "the calibrate folders a per-cell form is fitted from",
+    "--against": "the calibrate folders a form's relMSE target compares with",
+    "--free-level": "a per-cell form's own level terms",
 }
 
 #: The start of the help line of an option that several commands take: the same on every command.
