@@ -296,15 +296,26 @@ def spectral_radius(P, tol=1e-3, _split=None):
     if _split is None:
         N = round((n // 4) ** (1.0 / 3.0))
         _split = _Split(P, *_red_black(N))
-    m = _split.black.size
+    return operator_radius(_split.reduced, _split.black.size, lambda v: P @ v, n, _split.diag, tol,
+                           dense_reduced=lambda: (_split.P_br @ _split.P_rb).toarray(), dense_full=P.toarray)
+
+
+def operator_radius(reduced, m, full, n, diag, tol=1e-3, dense_reduced=None, dense_full=None):
+    """``rho(P)`` from products alone: ``reduced`` (``m`` unknowns) and ``full`` (``n``), both callables.
+
+    The route of :func:`spectral_radius` for any coding of ``P`` (the sparse matrices here, the
+    matrix-free :mod:`sslpv_gl.stencil`): ``diag`` says whether ``P`` has the reflection's diagonal
+    blocks (then ``rho`` is estimated on ``full``). ``dense_reduced`` / ``dense_full`` return the
+    dense matrices for the small cases; without them they are assembled column by column.
+    """
     if m == 0:
         return 0.0
-    if _split.diag:
-        return _full_radius(P, tol)
+    if diag:
+        return _full_radius(full, n, tol, dense_full)
     if m <= _DENSE_EIG_MAX:
-        Q = (_split.P_br @ _split.P_rb).toarray()
+        Q = dense_reduced() if dense_reduced is not None else _dense(reduced, m)
         return float(np.sqrt(np.abs(np.linalg.eigvals(Q)).max()))
-    op = spla.LinearOperator((m, m), matvec=_split.reduced, dtype=np.float64)
+    op = spla.LinearOperator((m, m), matvec=reduced, dtype=np.float64)
     v0 = np.random.default_rng(12345).random(m) + 0.5
     try:
         w = spla.eigs(op, k=1, which="LM", tol=tol, ncv=min(20, m - 1), maxiter=200,
@@ -318,22 +329,28 @@ def spectral_radius(P, tol=1e-3, _split=None):
         # ARPACK stops when its Krylov space closes on an invariant subspace (seen as
         # "starting vector is zero" on a scene whose lit cells reach only part of the grid):
         # estimate the radius by power iteration on the reduced operator instead
-        return _power_radius(_split.reduced, v0)
+        return _power_radius(reduced, v0)
     return float(np.sqrt(np.abs(w).max()))
 
 
-def _full_radius(P, tol):
+def _dense(apply, m):
+    """The ``m x m`` matrix of the linear map ``apply``, column by column."""
+    return np.column_stack([apply(e) for e in np.eye(m)])
+
+
+def _full_radius(full, n, tol, dense=None):
     """``rho(P)`` on ``P`` itself, for an operator with diagonal blocks (no ``rho(P)^2`` relation)."""
-    n = P.shape[0]
     if n <= 2 * _DENSE_EIG_MAX:
-        return float(np.abs(np.linalg.eigvals(P.toarray())).max())
+        A = dense() if dense is not None else _dense(full, n)
+        return float(np.abs(np.linalg.eigvals(A)).max())
     v0 = np.random.default_rng(12345).random(n) + 0.5
+    op = spla.LinearOperator((n, n), matvec=full, dtype=np.float64)
     try:
         # k = 2: the near +- pairs of the bipartite part are both kept in the Krylov space
-        w = spla.eigs(P, k=2, which="LM", tol=tol, ncv=min(40, n - 1), maxiter=500, v0=v0,
+        w = spla.eigs(op, k=2, which="LM", tol=tol, ncv=min(40, n - 1), maxiter=500, v0=v0,
                       return_eigenvectors=False)
     except (spla.ArpackNoConvergence, spla.ArpackError):
-        return _power_radius(lambda y: P @ (P @ y), v0)
+        return _power_radius(lambda y: full(full(y)), v0)
     return float(np.abs(w).max())
 
 
