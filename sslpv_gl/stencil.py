@@ -1,6 +1,84 @@
 """One SSLPV propagation step ``P`` applied matrix-free, per colour, on red/black sub-lattices.
 
-TODO docstring
+The operator of :func:`sslpv_gl.transfer.transfer_operator` (Borlum et al., HPG 2011, Sec. 3.2,
+Eq. 3, Sec. 4) without its matrix: for a destination ``d`` and its six face neighbours ``s``
+(``docs/conventions.md``, :func:`sslpv_gl.twin.propagate`)::
+
+    c_d += M_s @ (exp(-0.5 (sigma_lpv[s] + sigma_lpv[d]) dx_axis) (1 - e_s e_d) (1 - r_dr)^[s in, d out]
+                  * emit[s] S(s) c_s)                                                      (T1)
+    c_s += r_dr exp(-sigma_lpv[s] dx_axis) M_{+o} F_o emit[s] S(s) c_s   per surface face (Eq. (R3))
+
+``S(s) = diag(1, k1, k1, k1)``, ``k1 = (1 - sp[s]) + sp[s] g[s]`` (Eq. 3 on the source cell),
+``M_s`` :func:`sslpv_gl.sh.propagation_matrices` (Sec. 4), nothing from outside the grid; ``e``
+the ``empty`` mask (``outside = interior``), ``r_dr`` / ``inside`` the surface reflection of
+:mod:`sslpv_gl.reflect`. The first step of the steady solve uses ``emit = 1`` (``first_step``).
+
+Layout
+------
+The grid of one colour is split into the eight sub-lattices ``q = (pz, py, px)``, the cells
+``[pz::2, py::2, px::2]``; a cell's parity ``(x + y + z) % 2`` is that of ``pz + py + px``, so
+four sub-lattices are red (even) and four black. The face neighbour at offset ``o = +-1`` along
+an axis of a cell at index ``i`` of ``q`` is at index ``i + floor((p + o) / 2)`` of the
+sub-lattice with ``p`` flipped on that axis: every transfer in (T1) is one slice of one
+sub-lattice onto a slice of another, so ``P_rb`` (red rows, black columns) and ``P_br`` are
+applied without touching the other half. A vector in *parity layout* holds the red
+sub-lattices, then the black ones, each ``(4, nz, ny, nx)``; ``N`` may be odd (the
+sub-lattices then differ in size).
+
+Precomputed per colour: per destination sub-lattice and direction the factor of (T1) on its
+slice (the transmittance, ``1 - e_s e_d`` and ``1 - r_dr``: six ``(N, N, N)`` arrays in all),
+``k1``, ``emit`` and ``emit k1`` per cell, and at the surface cells only the 4x4 blocks of Eq. (R3)
+and ``E - I``, ``E = (I - P_rr)^{-1}``. A product applies the nonzero entries of each ``M_s``
+(the entries below ``1e-12 max|M|``, the quadrature's noise where the paper prints 0, are
+dropped as in ``transfer_operator``: 6 of 16 per matrix; keeping them changes a product by a
+relative ~1e-16, rounding, and costs half as much work again) as 16 array operations per
+sub-lattice and direction, in slabs of ~2^15 cells along z so that the temporaries stay in cache.
+
+The steady solve (:func:`sslpv_gl.steady.steady_state`, "Solver") uses the reduced product
+``(P_bb + P_br E P_rb) y`` on the black cells (:meth:`StencilOperator.reduced`; ``P_bb`` and
+``E`` only with the reflection), which costs one product of ``P``. Solving the full system
+``(I - P) x = b`` with the same products took twice the BiCGSTAB iterations and 2.5-3x the time
+(N = 32 and 64, one colour of the sphere of ``benchmarks/bench_steady.py``), so only the reduced
+system is used. The spectral radius is :func:`sslpv_gl.transfer.operator_radius` on these
+products (ARPACK, its power-iteration fallback, and dense matrices assembled column by column for
+the smallest grids).
+
+Memory and time
+---------------
+One colour's operator holds about ``10 N^3`` float64 (the six factors, ``k1``, ``emit``,
+``emit k1``, a slab buffer) plus the surface cells' blocks, against ``36 * 12`` bytes per cell and
+colour for the CSR matrix (values and column indices), built for three colours at once.
+``python benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator sparse stencil
+[--scenes ...]`` measured the steady solve of its sphere (rtol 1e-8; peak resident memory of a
+fresh process that builds the scene and solves it once, 0.22-0.27 GiB of it at the call at
+N = 128; 2-core shared VM, load average 1.5-7.5; "diff": max ``|sparse - stencil|`` of max c00)::
+
+    scene     N   operator  total [s]  build [s]  spectrum [s]  solve [s]  BiCGSTAB it.  peak [GiB]  diff
+    vacuum   32   sparse        0.8       0.26        0.20         0.37    37,37,34         0.13    3e-15
+    vacuum   32   stencil       1.0       0.05        0.25         0.65    37,37,34         0.08
+    vacuum   64   sparse       11.3       2.65        2.98         5.57    71,68,60         0.65    4e-14
+    vacuum   64   stencil      10.4       0.09        3.25         6.83    71,68,60         0.25
+    vacuum  128   sparse      161.4      26.97       31.78       101.47    128,119,103      4.53    6e-11
+    vacuum  128   stencil     142.7       0.68       38.12       102.23    128,119,103      1.52
+    absorb  128   stencil     116.8       1.08       41.72        71.60    90,78,61         1.59
+    interior 128  stencil     114.7       1.46       43.11        67.69    91,72,56         1.56
+    rdr      64   sparse       29.2       4.36       17.23         7.51    77,70,64         1.02    2e-14
+    rdr      64   stencil      25.0       0.14       16.69         7.95    77,70,64         0.54
+    rdr     128   sparse      394.1      47.52      213.84       131.40    141,119,90       7.51    5e-09
+    rdr     128   stencil     346.5       1.19      230.33       113.30    137,114,90       3.79
+
+Every N = 128 solve reached the full system's relative residual 1e-8 (``info["residual"]``).
+The peak is the spectral check's: ARPACK's basis of ``ncv = 20`` vectors of the reduced system
+(``k = 2``, ``ncv = 40`` vectors of the full one with ``rdr``, whose check dominates its time
+too); during the BiCGSTAB solve itself about half as much was held (``tracemalloc`` at N = 48).
+
+Limits
+------
+* One product costs about as much as a CSR product at large ``N`` and more at small ``N``
+  (Python's overhead per slice: 768 array operations per product at any ``N``), hence
+  ``operator = "auto"`` keeps the sparse matrices below :data:`sslpv_gl.steady.STENCIL_MIN_N`.
+* Float64, one thread (NumPy's array operations).
+* ``matrices`` is any ``(6, 4, 4)``; the work grows with its number of entries above the drop.
 """
 
 from __future__ import annotations
@@ -14,8 +92,9 @@ from .transfer import _DROP, _bad, _dx, _finite, _grid_size, _material, operator
 
 __all__ = ["StencilOperator", "stencil_operator"]
 
-#: The eight sub-lattices ``(pz, py, px)`` (cells ``[pz::2, py::2, px::2]``), red (even parity) first.
+#: Cells per slab of a sub-lattice in one pass of the product (fits the temporaries in a core's L2 cache).
 _CHUNK = 1 << 15
+#: The eight sub-lattices ``(pz, py, px)`` (cells ``[pz::2, py::2, px::2]``), red (even parity) first.
 _BLOCKS = tuple(sorted(itertools.product((0, 1), repeat=3), key=lambda q: (sum(q) % 2, q)))
 
 
@@ -111,19 +190,23 @@ class StencilOperator:
         if ins is not None and r_dr:
             from .reflect import AXIS_COEFF, surface_faces
 
-            D = np.zeros((N, N, N, 4, 4))
+            faces = [surface_faces(ins, offset) for offset in SOURCE_OFFSETS]
+            surf = np.flatnonzero(np.logical_or.reduce(faces).ravel())     # the surface cells only
+            D = np.zeros((surf.size, 4, 4))
             for s, offset in enumerate(SOURCE_OFFSETS):
                 axis = int(np.flatnonzero(offset)[0])
                 flip = np.ones(4)
-                flip[AXIS_COEFF[axis]] = -1.0
-                w = surface_faces(ins, offset) * np.exp(-sig * dxs[axis]) * r_dr
-                D += w[..., None, None] * (mats[s] * flip[None, :])
+                flip[AXIS_COEFF[axis]] = -1.0                # F_o: the lobe mirrored about the face
+                w = faces[s].ravel()[surf] * np.exp(-sig.ravel()[surf] * dxs[axis]) * r_dr
+                D += w[:, None, None] * (mats[s] * flip[None, :])
+            z, y, x = np.unravel_index(surf, (N, N, N))
             for q in _BLOCKS:
-                Dq = block(D, q).reshape(-1, 4, 4)
-                idx = np.flatnonzero(np.any(Dq != 0.0, axis=(1, 2)))
-                if idx.size:
-                    self.diag[q] = (idx, Dq[idx])
-            del D
+                sel = (z % 2 == q[0]) & (y % 2 == q[1]) & (x % 2 == q[2])
+                sel[sel] = np.any(D[sel] != 0.0, axis=(1, 2))
+                if sel.any():
+                    _, ny, nx = self.shapes[q]
+                    self.diag[q] = (((z[sel] // 2) * ny + y[sel] // 2) * nx + x[sel] // 2, D[sel])
+            del faces, D
         self.has_diag = bool(self.diag)
         # E = (I - P_rr)^{-1} on the red surface cells, stored as E - I (the identity elsewhere)
         self.e_minus_i = {}
