@@ -41,6 +41,21 @@ The twin's accumulation after K steps differed from the steady state by
 1.0e-4 of max c00 at every N (by construction of K). N = 64 steady: operator
 1.15 s, spectral check 4.31 s, solve 9.07 s.
 
+``--operator sparse|stencil|auto`` (default ``auto``) is ``steady_state``'s operator
+(:mod:`sslpv_gl.stencil`: matrix-free). ``--steady-only`` skips 2-4 (far too slow at
+N = 128) and runs each (scene, N, operator) solve in a fresh process of its own
+(``--case``), reporting the time split (operator build, spectral check, solve), the
+BiCGSTAB iterations, the peak resident memory of that process (``ru_maxrss`` from
+``os.wait4`` on that child alone: interpreter, NumPy, SciPy, the scene and the solve; its
+resident set when the call began is printed beside it) and, with several operators, the
+largest difference between their grids. ``--scenes``: the sphere with its outside as
+``vacuum`` (above), ``absorb`` (sink cells), ``interior`` (no transfer between two outside
+cells) or ``rdr`` (``boundary_reflect = rdr``, eta 1.4). Figures:
+:mod:`sslpv_gl.stencil` ("Memory and time"), from
+``benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator sparse stencil
+[--scenes ...]``: about 6 min for the vacuum sphere with both operators, 4-6 min per further
+scene with the stencil alone; ``--write`` puts its printout on ``bench_steady_memory.md``.
+
 ``OPENBLAS_NUM_THREADS`` is set to 1 unless already set (``--blas-threads``):
 on the 2-core machine, while other jobs were running, OpenBLAS' threads made
 the Krylov vector operations of an N = 32 solve 12x slower (5.8 s against

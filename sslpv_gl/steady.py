@@ -16,7 +16,8 @@ which exists when the spectral radius ``rho(P) < 1``. This module solves (S2)
 with a Krylov method, and offers the iterated alternative that stops when the
 light is gone.
 
-``P`` itself, its ordering and its spectral radius are :mod:`sslpv_gl.transfer`; the
+``P`` itself, its ordering and its spectral radius are :mod:`sslpv_gl.transfer` (sparse
+matrices) and :mod:`sslpv_gl.stencil` (the same operator applied matrix-free); the
 transfer rule is the one of ``docs/conventions.md`` (and of :func:`sslpv_gl.twin.propagate`).
 
 Functions
@@ -31,7 +32,7 @@ Functions
    * - ``transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)``
      - Eq. 3, Sec. 4
      - list of 3 ``scipy.sparse.csr_matrix`` ``(4 N^3, 4 N^3)``, one per colour
-   * - ``steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, ...)``
+   * - ``steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, ..., operator="auto")``
      - Sec. 3.2 ("convergence"), Sec. 4 (skip)
      - ``(accum, info)``: (S2), ``accum`` float64 ``(N, N, N, 3, 4)``
    * - ``propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, ...)``
@@ -89,6 +90,10 @@ Parameters
    * - ``check_spectrum`` (``steady_state``)
      - ``True``
      - estimate ``rho(P)`` per colour and raise ``ValueError`` if >= 1
+   * - ``operator`` (``steady_state``)
+     - ``"auto"``
+     - ``"sparse"``, ``"stencil"`` (matrix-free) or ``"auto"``: the stencil for
+       ``N >= STENCIL_MIN_N`` (48); see "Operator" below
    * - ``tol`` (``propagate_until``)
      - ``1e-3``
      - stop when ``remaining_fraction < tol``, in (0, 1)
@@ -115,6 +120,24 @@ BiCGSTAB to 13 iterations but took 16 s to build, so no further
 preconditioner is used. BiCGSTAB was 2-3x faster than GMRES(50-60) at N = 32
 and 64 (GMRES's orthogonalisation dominates at these sizes), hence the
 default.
+
+Operator
+--------
+``"sparse"`` builds the CSR matrices of :func:`transfer_operator` for the three colours
+at once (and a second set for the first step when ``emit`` is given), then the red/black
+blocks of one colour. ``"stencil"`` builds one colour's :class:`sslpv_gl.stencil.StencilOperator`
+at a time and applies ``P``, the reduced product and the spectral check by slices; both
+solve the same reduced system with the same BiCGSTAB and took the same iterations, and their
+grids differed by rounding only. ``"auto"`` takes the stencil from ``N >= STENCIL_MIN_N = 48``:
+below, the sparse path was faster (the stencil's Python overhead per slice), from there on the
+stencil was as fast or faster, and it always needed less memory. Measured by
+``python benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator sparse stencil``
+(and ``--sizes 24 32 48 64``), each solve in a fresh process, peak resident memory by ``os.wait4``
+(the full table is :mod:`sslpv_gl.stencil`'s, "Memory and time"): total 0.7 / 1.1 s (sparse /
+stencil) at N = 32, 3.4 / 2.8 s at N = 48, 11.3 / 10.4 s at N = 64 and 161 / 143 s at
+N = 128, peak 4.53 / 1.52 GiB at N = 128 (7.51 / 3.79 GiB with ``boundary_reflect = rdr``,
+whose spectral check holds 40 full-size vectors); building the sparse matrices and their red/black
+blocks alone took 27 s there.
 
 Convergence check
 -----------------
@@ -154,7 +177,9 @@ accuracy there, and the default ``1e-3`` somewhat less.
 
 Limits
 ------
-* Memory: that of ``P`` (:mod:`sslpv_gl.transfer`).
+* Memory: that of ``P`` (:mod:`sslpv_gl.transfer` or :mod:`sslpv_gl.stencil`, above) and of
+  ``c0`` and ``accum`` (96 bytes per cell each), the Krylov vectors of one colour (BiCGSTAB: about
+  eight vectors of the black cells' unknowns) and a few full-size ones (``b``, ``x``).
 * Float64 throughout (the GL renderer stores fp32/fp16).
 * ``propagate_until`` applies ``P`` step by step with the sparse operator
   (same rule as the twin to ~1e-16 per step, faster); its cost is the

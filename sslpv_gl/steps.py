@@ -6,7 +6,8 @@ runs as each count passes, with that count's own radiance scale (a calibrated ma
 one per budget), so every image equals a render of its count alone. ``steps = auto`` stops
 at the first check (every 8 steps) where the propagating flux falls below
 ``converge_tol`` of the injected one; ``steps = steady`` solves the accumulation on the
-host (:func:`sslpv_gl.steady.steady_state`), whose wall time is its propagation time.
+host (:func:`sslpv_gl.steady.steady_state`, matrix-free from ``STENCIL_MIN_N`` on, so that
+``N = 128`` fits in memory), whose wall time is its propagation time.
 The propagation's GL time excludes the shading passes and the convergence checks.
 """
 

@@ -30,14 +30,21 @@ exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
 eigenvalues up to ``_DENSE_EIG_MAX`` unknowns, else with ARPACK (by power iteration where
 ARPACK stops on an invariant subspace). With the reflection's diagonal blocks that relation
 no longer holds, and ``rho(P)`` is estimated on ``P`` itself (dense up to twice that size, else
-ARPACK with two Ritz values, else power iteration on ``P^2``).
+ARPACK with two Ritz values, else power iteration on ``P^2``). :func:`operator_radius` is that
+route for any coding of ``P`` that offers its products (the matrix-free :mod:`sslpv_gl.stencil`).
 The input checks shared with :mod:`sslpv_gl.steady` are here too.
 
 Limits
 ------
 * Memory: ``P`` has 36 stored entries per cell and colour (9.4 M at
-  ``N = 64``, ~110 MB per colour in CSR); ``N = 128`` needs ~0.9 GB per
-  colour and was not measured.
+  ``N = 64``, ~110 MB per colour in CSR; 75 M, ~0.9 GB per colour at ``N = 128``), built for
+  the three colours at once, and :class:`_Split` copies one colour's red/black blocks again.
+  Measured by ``python benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator
+  sparse stencil`` (peak resident memory of a whole :func:`sslpv_gl.steady.steady_state`,
+  fresh process): 0.65 GiB at ``N = 64``, 4.53 GiB at ``N = 128`` (7.51 GiB with the
+  reflection, whose spectral check adds 40 full-size ARPACK vectors); the build took 27 s there.
+  The matrix-free :mod:`sslpv_gl.stencil` applies the same operator in a fraction of that
+  memory; ``steady_state(operator="auto")`` uses it for large grids.
 """
 
 from __future__ import annotations
