@@ -16,7 +16,8 @@ which exists when the spectral radius ``rho(P) < 1``. This module solves (S2)
 with a Krylov method, and offers the iterated alternative that stops when the
 light is gone.
 
-``P`` itself, its ordering and its spectral radius are :mod:`sslpv_gl.transfer`; the
+``P`` itself, its ordering and its spectral radius are :mod:`sslpv_gl.transfer` (sparse
+matrices) and :mod:`sslpv_gl.stencil` (the same operator applied matrix-free); the
 transfer rule is the one of ``docs/conventions.md`` (and of :func:`sslpv_gl.twin.propagate`).
 
 Functions
@@ -31,7 +32,7 @@ Functions
    * - ``transfer_operator(sigma_lpv, sigma_s_prime, g, dx, matrices=None, emit=None)``
      - Eq. 3, Sec. 4
      - list of 3 ``scipy.sparse.csr_matrix`` ``(4 N^3, 4 N^3)``, one per colour
-   * - ``steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, ...)``
+   * - ``steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, ..., operator="auto")``
      - Sec. 3.2 ("convergence"), Sec. 4 (skip)
      - ``(accum, info)``: (S2), ``accum`` float64 ``(N, N, N, 3, 4)``
    * - ``propagate_until(c0, sigma_lpv, sigma_s_prime, g, dx, tol=1e-3, ...)``
@@ -89,6 +90,10 @@ Parameters
    * - ``check_spectrum`` (``steady_state``)
      - ``True``
      - estimate ``rho(P)`` per colour and raise ``ValueError`` if >= 1
+   * - ``operator`` (``steady_state``)
+     - ``"auto"``
+     - ``"sparse"``, ``"stencil"`` (matrix-free) or ``"auto"``: the stencil for
+       ``N >= STENCIL_MIN_N`` (48); see "Operator" below
    * - ``tol`` (``propagate_until``)
      - ``1e-3``
      - stop when ``remaining_fraction < tol``, in (0, 1)
@@ -115,6 +120,24 @@ BiCGSTAB to 13 iterations but took 16 s to build, so no further
 preconditioner is used. BiCGSTAB was 2-3x faster than GMRES(50-60) at N = 32
 and 64 (GMRES's orthogonalisation dominates at these sizes), hence the
 default.
+
+Operator
+--------
+``"sparse"`` builds the CSR matrices of :func:`transfer_operator` for the three colours
+at once (and a second set for the first step when ``emit`` is given), then the red/black
+blocks of one colour. ``"stencil"`` builds one colour's :class:`sslpv_gl.stencil.StencilOperator`
+at a time and applies ``P``, the reduced product and the spectral check by slices; both
+solve the same reduced system with the same BiCGSTAB and took the same iterations, and their
+grids differed by rounding only. ``"auto"`` takes the stencil from ``N >= STENCIL_MIN_N = 48``:
+below, the sparse path was faster (the stencil's Python overhead per slice), from there on the
+stencil was as fast or faster, and it always needed less memory. Measured by
+``python benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator sparse stencil``
+(and ``--sizes 24 32 48 64``), each solve in a fresh process, peak resident memory by ``os.wait4``
+(the full table is :mod:`sslpv_gl.stencil`'s, "Memory and time"): total 0.7 / 1.1 s (sparse /
+stencil) at N = 32, 3.4 / 2.8 s at N = 48, 11.3 / 10.4 s at N = 64 and 161 / 143 s at
+N = 128, peak 4.53 / 1.52 GiB at N = 128 (7.51 / 3.79 GiB with ``boundary_reflect = rdr``,
+whose spectral check holds 40 full-size vectors); building the sparse matrices and their red/black
+blocks alone took 27 s there.
 
 Convergence check
 -----------------
@@ -154,7 +177,9 @@ accuracy there, and the default ``1e-3`` somewhat less.
 
 Limits
 ------
-* Memory: that of ``P`` (:mod:`sslpv_gl.transfer`).
+* Memory: that of ``P`` (:mod:`sslpv_gl.transfer` or :mod:`sslpv_gl.stencil`, above) and of
+  ``c0`` and ``accum`` (96 bytes per cell each), the Krylov vectors of one colour (BiCGSTAB: about
+  eight vectors of the black cells' unknowns) and a few full-size ones (``b``, ``x``).
 * Float64 throughout (the GL renderer stores fp32/fp16).
 * ``propagate_until`` applies ``P`` step by step with the sparse operator
   (same rule as the twin to ~1e-16 per step, faster); its cost is the
@@ -170,6 +195,7 @@ import time
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from .stencil import stencil_operator
 from .transfer import _bad, _c0, _material, _red_black, _skip, _Split, spectral_radius, transfer_operator
 
 __all__ = [
@@ -184,13 +210,17 @@ _METHODS = ("bicgstab", "gmres")
 # scipy < 1.12 calls the relative tolerance `tol` (the project allows scipy >= 1.11)
 _RTOL = "rtol" if "rtol" in inspect.signature(spla.bicgstab).parameters else "tol"
 _GMRES_RESTART = 50
+#: ``operator`` choices of :func:`steady_state`.
+OPERATORS = ("auto", "sparse", "stencil")
+#: ``operator = "auto"`` uses the matrix-free stencil from this grid size on (module docstring, "Operator").
+STENCIL_MIN_N = 48
 
 
 # ------------------------------------------------------------ steady state
 
 def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rtol=1e-8,
                  method="bicgstab", maxiter=5000, check_spectrum=True, emit=None, empty=None, r_dr=0.0,
-                 inside=None):
+                 inside=None, operator="auto"):
     """Converged accumulation grid ``sum_{k>skip} P^k c0`` (Sec. 3.2, Eq. 3, Sec. 4) -> ``(accum, info)``.
 
     The paper's accumulation grid once "the propagation grid is empty"
@@ -200,8 +230,12 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
     red/black reduction (module docstring, "Solver"), so ``x = (I - P)^{-1}
     b`` is the series (S2).
 
-    ``accum``: float64 ``(N, N, N, 3, 4)``. ``info``: dict with ``method``,
-    ``rtol``, per colour lists ``iterations`` (Krylov iterations),
+    ``operator``: ``"sparse"`` (the matrices of :func:`transfer_operator`, all colours built at
+    once), ``"stencil"`` (:mod:`sslpv_gl.stencil`, matrix-free, one colour at a time) or
+    ``"auto"`` (the stencil from ``N >=`` :data:`STENCIL_MIN_N` on; module docstring, "Operator").
+
+    ``accum``: float64 ``(N, N, N, 3, 4)``. ``info``: dict with ``method``, ``operator`` (the one
+    used), ``rtol``, per colour lists ``iterations`` (Krylov iterations),
     ``products`` (applications of ``P``, the skip steps and the spectral
     check included), ``residual`` (true ``||(I-P)x - b|| / ||b||`` on the full
     system), ``rho`` (spectral radius estimate, ``None`` unchecked), and
@@ -225,42 +259,55 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
         _bad("rtol", f"must be in (0, 1), got {rtol!r}", "pass e.g. 1e-8")
     if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
         _bad("maxiter", f"must be an integer >= 1, got {maxiter!r}", "pass e.g. 5000")
+    if not isinstance(operator, str) or operator not in OPERATORS:
+        _bad("operator", f"unknown operator {operator!r}", "use one of: " + ", ".join(OPERATORS))
+    if operator == "auto":
+        operator = "stencil" if N >= STENCIL_MIN_N else "sparse"
     sig, spr, gg = _material(sigma_lpv, sigma_s_prime, g, N)
 
-    ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty, r_dr, inside)
-    # step 1 carries the injected light, which has crossed the surface inwards: every cell emits
-    ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty, r_dr, inside)
+    if operator == "sparse":
+        ops = transfer_operator(sig, spr, gg, dx, matrices, emit, empty, r_dr, inside)
+        # step 1 carries the injected light, which has crossed the surface inwards: every cell emits
+        ops1 = ops if emit is None else transfer_operator(sig, spr, gg, dx, matrices, None, empty, r_dr, inside)
+        red, black = _red_black(N)
+    else:
+        em = None if emit is None else _material(emit, 0.0, 0.0, N)[0]
+        emp = None if empty is None else _material(empty, 0.0, 0.0, N)[0]
     t_op = time.perf_counter() - t_start
-    red, black = _red_black(N)
     accum = np.zeros_like(c0)
-    info = {"method": method, "rtol": float(rtol), "iterations": [], "products": [], "residual": [],
-            "rho": [], "time": {"operator": t_op, "spectrum": 0.0, "solve": 0.0}}
-    rho_cache = []                           # (P, rho): grey materials give equal operators
+    info = {"method": method, "operator": operator, "rtol": float(rtol), "iterations": [], "products": [],
+            "residual": [], "rho": [], "time": {"operator": t_op, "spectrum": 0.0, "solve": 0.0}}
+    rho_cache = []                           # (key, rho): grey materials give equal operators
     for col in range(3):
-        P = ops[col]
-        b = ops1[col] @ c0[..., col, :].reshape(-1)
+        t0 = time.perf_counter()
+        if operator == "sparse":
+            op = _SparseColour(ops[col], ops1[col], red, black)
+            key = (ops[col].data,)
+        else:                                # one colour at a time: only its operator is held
+            op = stencil_operator(sig, spr, gg, dx, col, matrices, em, emp, r_dr, inside)
+            key = tuple(None if a is None else a[..., col] for a in (sig, spr, gg, em, emp))
+        info["time"]["operator"] += time.perf_counter() - t0
+        b = op.step(op.vec(c0[..., col, :]), first_step=True)
         for _ in range(skip):                # the skipped steps and the first accumulated one, exactly
-            b = P @ b
+            b = op.step(b)
         if not np.any(b):
             info["iterations"].append(0)
             info["products"].append(skip + 1)
             info["residual"].append(0.0)
             info["rho"].append(None)
             continue
-        t0 = time.perf_counter()
-        split = _Split(P, red, black)
-        info["time"]["operator"] += time.perf_counter() - t0
 
         rho = None
         if check_spectrum:
             t0 = time.perf_counter()
-            for P_seen, r in rho_cache:
-                if P_seen.data.shape == P.data.shape and np.array_equal(P_seen.data, P.data):
+            for seen, r in rho_cache:
+                if all((x is None and y is None) or (x is not None and y is not None and x.shape == y.shape
+                                                     and np.array_equal(x, y)) for x, y in zip(seen, key)):
                     rho = r
                     break
             if rho is None:
-                rho = spectral_radius(P, _split=split)
-                rho_cache.append((P, rho))
+                rho = op.radius()
+                rho_cache.append((key, rho))
             info["time"]["spectrum"] += time.perf_counter() - t0
             if rho >= 1.0:
                 _bad("steady_state", f"colour {col}: the transfer operator's spectral radius is {rho:.6g} >= 1, "
@@ -268,29 +315,28 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
                      "check sigma_lpv >= 0 and |k1| <= 1, or use a fixed step count")
 
         t0 = time.perf_counter()
-        rhs = b[black] + split.P_br @ split.apply_e(b[red])
+        rhs = op.rhs(b)
         # the red rows of the full residual vanish (x_r is formed exactly), its
         # black rows are the reduced residual: scale rtol so that it bounds
         # the full system's relative residual, as documented
         rtol_reduced = float(rtol) * float(np.linalg.norm(b) / max(np.linalg.norm(rhs), np.finfo(float).tiny))
-        m = black.size
-        op = spla.LinearOperator((m, m), matvec=lambda y, s=split: y - s.reduced(y), dtype=np.float64)
+        m = rhs.size
+        lin = spla.LinearOperator((m, m), matvec=lambda y, o=op: y - o.reduced(y), dtype=np.float64)
         iters = [0]
 
         def count(*_args):
             iters[0] += 1
 
         if method == "bicgstab":
-            xb, flag = spla.bicgstab(op, rhs, **{_RTOL: rtol_reduced}, atol=0.0, maxiter=int(maxiter), callback=count)
+            xb, flag = spla.bicgstab(lin, rhs, **{_RTOL: rtol_reduced}, atol=0.0, maxiter=int(maxiter), callback=count)
         else:
-            xb, flag = spla.gmres(op, rhs, **{_RTOL: rtol_reduced}, atol=0.0, restart=_GMRES_RESTART,
+            xb, flag = spla.gmres(lin, rhs, **{_RTOL: rtol_reduced}, atol=0.0, restart=_GMRES_RESTART,
                                   maxiter=max(1, int(maxiter) // _GMRES_RESTART + 1),
                                   callback=count, callback_type="pr_norm")
-        x = np.empty_like(b)
-        x[black] = xb
-        x[red] = split.apply_e(b[red] + split.P_rb @ xb)
+        del rhs, lin
+        x = op.expand(b, xb)
         # check on the full system, independent of the solver's own estimate
-        res = float(np.linalg.norm(x - P @ x - b) / np.linalg.norm(b))
+        res = float(np.linalg.norm(x - op.step(x) - b) / np.linalg.norm(b))
         info["time"]["solve"] += time.perf_counter() - t0
         if flag != 0 or not np.all(np.isfinite(x)) or not res <= 10.0 * rtol:
             why = "broke down" if flag < 0 else f"did not converge in {iters[0]} iterations"
@@ -298,13 +344,55 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
             _bad("steady_state", f"colour {col}: {method} {why} (relative residual {res:.3g}, rtol {rtol:g}, "
                  f"spectral radius {rho_txt}); the series converges too slowly or not at all",
                  "add absorption, raise maxiter, or use propagate_until")
-        accum[..., col, :] = x.reshape(N, N, N, 4)
+        accum[..., col, :] = op.grid(x)
         info["iterations"].append(int(iters[0]))
-        info["products"].append(skip + 1 + split.products + 2)
+        info["products"].append(skip + 1 + op.products + 2)
         info["residual"].append(res)
         info["rho"].append(rho)
+        del op, b, x, xb
     info["time"]["total"] = time.perf_counter() - t_start
     return accum, info
+
+
+class _SparseColour:
+    """One colour's sparse ``P`` (and ``P1``, step 1 without sinks) behind the interface of
+    :class:`sslpv_gl.stencil.StencilOperator` that :func:`steady_state` uses (vectors in the
+    ordering of :func:`transfer_operator`)."""
+
+    def __init__(self, P, P1, red, black):
+        self.P, self.P1, self.red, self.black = P, P1, red, black
+        self.split = _Split(P, red, black)
+
+    @property
+    def products(self):
+        return self.split.products
+
+    def vec(self, grid):
+        return np.asarray(grid, dtype=np.float64).reshape(-1)
+
+    def grid(self, v):
+        N = round((v.size // 4) ** (1.0 / 3.0))
+        return v.reshape(N, N, N, 4)
+
+    def step(self, v, first_step=False):
+        return (self.P1 if first_step else self.P) @ v
+
+    def reduced(self, y):
+        return self.split.reduced(y)
+
+    def radius(self):
+        return spectral_radius(self.P, _split=self.split)
+
+    def rhs(self, b):
+        split, red, black = self.split, self.red, self.black
+        return b[black] + split.P_br @ split.apply_e(b[red])
+
+    def expand(self, b, xb):
+        split, red, black = self.split, self.red, self.black
+        x = np.empty_like(b)
+        x[black] = xb
+        x[red] = split.apply_e(b[red] + split.P_rb @ xb)
+        return x
 
 
 # --------------------------------------------------------- steps until done

@@ -6,7 +6,8 @@ runs as each count passes, with that count's own radiance scale (a calibrated ma
 one per budget), so every image equals a render of its count alone. ``steps = auto`` stops
 at the first check (every 8 steps) where the propagating flux falls below
 ``converge_tol`` of the injected one; ``steps = steady`` solves the accumulation on the
-host (:func:`sslpv_gl.steady.steady_state`), whose wall time is its propagation time.
+host (:func:`sslpv_gl.steady.steady_state`, matrix-free from ``STENCIL_MIN_N`` on, so that
+``N = 128`` fits in memory), whose wall time is its propagation time.
 The propagation's GL time excludes the shading passes and the convergence checks.
 """
 
@@ -69,12 +70,14 @@ def propagate_and_shade(renderer, scene, params, ks, resolved, grid, dx, c0, bou
 
         acc, info = steady_state(c0, material["sigma_lpv"], material["sigma_s_prime"], material["g"], dx,
                                  skip=params.skip, emit=material["emit"], empty=material.get("empty"),
-                                 r_dr=material.get("r_dr", 0.0), inside=material["inside"])
+                                 r_dr=material.get("r_dr", 0.0), inside=material["inside"],
+                                 operator="auto")        # matrix-free from STENCIL_MIN_N on: N = 128 fits
         write_grid(grid.accum, acc, params.precision)
         ctx.finish()
         prop_ms = (time.perf_counter_ns() - t) / 1e6       # a host solve: its wall time is its cost
         warnings.append(f"steps=steady: accumulation solved on the host ({info.get('method', 'krylov')}, "
-                        f"{info.get('iterations')} iterations); its propagation time is host wall time")
+                        f"{info.get('operator')} operator, {info.get('iterations')} iterations); its propagation "
+                        "time is host wall time")
         shade_now(None, None)
         return outputs
 

@@ -30,14 +30,21 @@ exp(-0.5 (sigma[s] + sigma[d]) dx_axis) * (1 if b == 0 else k1[s])``.
 eigenvalues up to ``_DENSE_EIG_MAX`` unknowns, else with ARPACK (by power iteration where
 ARPACK stops on an invariant subspace). With the reflection's diagonal blocks that relation
 no longer holds, and ``rho(P)`` is estimated on ``P`` itself (dense up to twice that size, else
-ARPACK with two Ritz values, else power iteration on ``P^2``).
+ARPACK with two Ritz values, else power iteration on ``P^2``). :func:`operator_radius` is that
+route for any coding of ``P`` that offers its products (the matrix-free :mod:`sslpv_gl.stencil`).
 The input checks shared with :mod:`sslpv_gl.steady` are here too.
 
 Limits
 ------
 * Memory: ``P`` has 36 stored entries per cell and colour (9.4 M at
-  ``N = 64``, ~110 MB per colour in CSR); ``N = 128`` needs ~0.9 GB per
-  colour and was not measured.
+  ``N = 64``, ~110 MB per colour in CSR; 75 M, ~0.9 GB per colour at ``N = 128``), built for
+  the three colours at once, and :class:`_Split` copies one colour's red/black blocks again.
+  Measured by ``python benchmarks/bench_steady.py --steady-only --sizes 32 64 128 --operator
+  sparse stencil`` (peak resident memory of a whole :func:`sslpv_gl.steady.steady_state`,
+  fresh process): 0.65 GiB at ``N = 64``, 4.53 GiB at ``N = 128`` (7.51 GiB with the
+  reflection, whose spectral check adds 40 full-size ARPACK vectors); the build took 27 s there.
+  The matrix-free :mod:`sslpv_gl.stencil` applies the same operator in a fraction of that
+  memory; ``steady_state(operator="auto")`` uses it for large grids.
 """
 
 from __future__ import annotations
@@ -296,15 +303,26 @@ def spectral_radius(P, tol=1e-3, _split=None):
     if _split is None:
         N = round((n // 4) ** (1.0 / 3.0))
         _split = _Split(P, *_red_black(N))
-    m = _split.black.size
+    return operator_radius(_split.reduced, _split.black.size, lambda v: P @ v, n, _split.diag, tol,
+                           dense_reduced=lambda: (_split.P_br @ _split.P_rb).toarray(), dense_full=P.toarray)
+
+
+def operator_radius(reduced, m, full, n, diag, tol=1e-3, dense_reduced=None, dense_full=None):
+    """``rho(P)`` from products alone: ``reduced`` (``m`` unknowns) and ``full`` (``n``), both callables.
+
+    The route of :func:`spectral_radius` for any coding of ``P`` (the sparse matrices here, the
+    matrix-free :mod:`sslpv_gl.stencil`): ``diag`` says whether ``P`` has the reflection's diagonal
+    blocks (then ``rho`` is estimated on ``full``). ``dense_reduced`` / ``dense_full`` return the
+    dense matrices for the small cases; without them they are assembled column by column.
+    """
     if m == 0:
         return 0.0
-    if _split.diag:
-        return _full_radius(P, tol)
+    if diag:
+        return _full_radius(full, n, tol, dense_full)
     if m <= _DENSE_EIG_MAX:
-        Q = (_split.P_br @ _split.P_rb).toarray()
+        Q = dense_reduced() if dense_reduced is not None else _dense(reduced, m)
         return float(np.sqrt(np.abs(np.linalg.eigvals(Q)).max()))
-    op = spla.LinearOperator((m, m), matvec=_split.reduced, dtype=np.float64)
+    op = spla.LinearOperator((m, m), matvec=reduced, dtype=np.float64)
     v0 = np.random.default_rng(12345).random(m) + 0.5
     try:
         w = spla.eigs(op, k=1, which="LM", tol=tol, ncv=min(20, m - 1), maxiter=200,
@@ -318,22 +336,28 @@ def spectral_radius(P, tol=1e-3, _split=None):
         # ARPACK stops when its Krylov space closes on an invariant subspace (seen as
         # "starting vector is zero" on a scene whose lit cells reach only part of the grid):
         # estimate the radius by power iteration on the reduced operator instead
-        return _power_radius(_split.reduced, v0)
+        return _power_radius(reduced, v0)
     return float(np.sqrt(np.abs(w).max()))
 
 
-def _full_radius(P, tol):
+def _dense(apply, m):
+    """The ``m x m`` matrix of the linear map ``apply``, column by column."""
+    return np.column_stack([apply(e) for e in np.eye(m)])
+
+
+def _full_radius(full, n, tol, dense=None):
     """``rho(P)`` on ``P`` itself, for an operator with diagonal blocks (no ``rho(P)^2`` relation)."""
-    n = P.shape[0]
     if n <= 2 * _DENSE_EIG_MAX:
-        return float(np.abs(np.linalg.eigvals(P.toarray())).max())
+        A = dense() if dense is not None else _dense(full, n)
+        return float(np.abs(np.linalg.eigvals(A)).max())
     v0 = np.random.default_rng(12345).random(n) + 0.5
+    op = spla.LinearOperator((n, n), matvec=full, dtype=np.float64)
     try:
         # k = 2: the near +- pairs of the bipartite part are both kept in the Krylov space
-        w = spla.eigs(P, k=2, which="LM", tol=tol, ncv=min(40, n - 1), maxiter=500, v0=v0,
+        w = spla.eigs(op, k=2, which="LM", tol=tol, ncv=min(40, n - 1), maxiter=500, v0=v0,
                       return_eigenvectors=False)
     except (spla.ArpackNoConvergence, spla.ArpackError):
-        return _power_radius(lambda y: P @ (P @ y), v0)
+        return _power_radius(lambda y: full(full(y)), v0)
     return float(np.abs(w).max())
 
 
