@@ -165,6 +165,18 @@ class TestBadInput:
         assert err[0].startswith("error: " + where), err[0]
         assert not out.exists() and list(tmp_path.iterdir()) == []
 
+    def test_extension_flags_reach_the_fit(self, tmp_path, capsys, monkeypatch):
+        """--outside, --boundary-reflect and --phase-scaling become the fit's renderer settings (no render here)."""
+        import harness.calibration.run as cal_run
+
+        seen = {}
+        monkeypatch.setattr(cal_run, "run_calibrate", lambda **kw: seen.update(kw) or {"out": str(kw["out"])})
+        code = main(["calibrate", "--json", "--family", "collision", "--out", str(tmp_path / "o"), "--outside",
+                     "interior", "--boundary-reflect", "rdr", "--phase-scaling", "delta-eddington"])
+        assert code == 0, capsys.readouterr().err
+        assert seen["settings"] == {"outside": "interior", "boundary_reflect": "rdr",
+                                    "phase_scaling": "delta-eddington"}
+
     @pytest.mark.parametrize("argv, where", [
         (["--from", "NOWHERE"], "--from: folder: NOWHERE holds no calibration.json"),
         (["--from", "baselines/calibrated/collision", "--against", "NOWHERE"],

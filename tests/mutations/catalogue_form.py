@@ -50,7 +50,7 @@ FORM = (
              "the study labels a per-cell form as its scalar family: the two share one headline column"),
     Mutation("calibrate_drops_extension_flags", "cli", "harness/cli/calibrate.py",
              'for key in ("outside", "boundary_reflect", "phase_scaling"):', 'for key in ("outside",):',
-             ("tests/test_calibrate.py::TestBadInput::test_one_line_and_nothing_written",),
+             ("tests/test_calibrate.py::TestBadInput::test_extension_flags_reach_the_fit",),
              "calibrate --boundary-reflect / --phase-scaling ignored: the fit runs without the extension it names"),
     Mutation("study_extension_in_paper_family", "cli", "harness/study/table.py",
              "return study_label(params.get(\"mapping\")) + family_suffix(params)",
