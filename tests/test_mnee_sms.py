@@ -15,7 +15,7 @@ vertex and the further solutions of a refraction, each against an independent ro
 
 The torus lit through its hole, where these chains carry a tenth of the first-scattered light, is
 measured against the photon tracer of :mod:`harness.reference.specular_paths` by
-``benchmarks/mnee_chains.py --sms`` (too slow for the suite).
+``benchmarks/mnee_sms.py`` (``docs/benchmarks/mnee_sms.md``; too slow for the suite).
 """
 
 import numpy as np
