@@ -14,16 +14,7 @@ import pytest
 from harness.study.extensions import base_family, default_outside, effects, extension_tags, family_suffix, is_extension
 from harness.study.table import family_of
 
-
-class _StubImages:
-    def __init__(self, renders, ref):
-        self.renders, self.ref = renders, ref
-
-    def render(self, d):
-        return self.renders[d]
-
-    def reference(self, d, shape):
-        return self.ref
+from .test_study import _StubImages
 
 
 @pytest.mark.parametrize("params, family", [

@@ -240,6 +240,15 @@ class ManifoldConnections(mi.SamplingIntegrator):
         value = dr.select(conn, sel_weight * intensity * (1.0 - fresnel_r) * g * tr, 0.0)
         return converged, conn, value, omega, p
 
+    def _light_from(self, scene, emitter, u2, last, y, conn):
+        """The chain's last segment, from its last vertex ``last`` to the light at ``y``: unoccluded (the other
+        air segments are the walk's casts), and the light's intensity toward it. Returns ``(conn, intensity)``."""
+        it = dr.zeros(mi.Interaction3f)
+        it.p, it.n, it.t = last[0], last[2], 0.0
+        conn = conn & ~scene.ray_test(it.spawn_ray_to(y), conn)
+        ds1, em1 = emitter.sample_direction(it, u2, conn)
+        return conn, em1 * dr.square(ds1.dist)       # point/spot value is I(w) / r^2 (pdf 1)
+
     def _chain_value(self, scene, sampler, x0, y, direction, eta, shape_id, k, emitter, u2, sel_weight, medium,
                      active):
         """A k-vertex chain (:mod:`harness.reference.mnee_chain`) from the straight seed, and its light at ``x0``.
@@ -251,12 +260,7 @@ class ManifoldConnections(mi.SamplingIntegrator):
         conv, verts, omega, dist = chain.walk_chain(scene, x0, y, verts, direction, dist, eta, shape_id,
                                                     self.newton_iterations, self.newton_tolerance, ok)
         g, _, aux = chain.chain_geometry(omega, dist, verts, y, eta)
-        conn = conv & (g > 0)
-        it = dr.zeros(mi.Interaction3f)
-        it.p, it.n, it.t = verts[-1][0], verts[-1][2], 0.0
-        conn &= ~scene.ray_test(it.spawn_ray_to(y), conn)    # the last air segment (the others: the walk's casts)
-        ds1, em1 = emitter.sample_direction(it, u2, conn)
-        intensity = em1 * dr.square(ds1.dist)
+        conn, intensity = self._light_from(scene, emitter, u2, verts[-1], y, conv & (g > 0))
         tr = self._ratio_track(medium, x0, verts[0][0], sampler, conn)
         for i in range(1, k - 1, 2):                          # inside the other parts: entry i -> exit i + 1
             tr *= self._ratio_track(medium, verts[i][0], verts[i + 1][0], sampler, conn)

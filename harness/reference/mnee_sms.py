@@ -190,11 +190,7 @@ def sampled_value(integ, scene, sampler, x0, y, kinds, eta, shape_id, emitter, u
     conn = conv & (g > 0) & sided(kinds, verts, aux)
     if exclude is not None:
         conn &= ~(exclude[1] & _same(verts[:1], [exclude[0]]))
-    it = dr.zeros(mi.Interaction3f)
-    it.p, it.n, it.t = verts[-1][0], verts[-1][2], 0.0
-    conn &= ~scene.ray_test(it.spawn_ray_to(y), conn)        # the last air segment (the others: the walk's casts)
-    ds1, em1 = emitter.sample_direction(it, u2, conn)
-    intensity = em1 * dr.square(ds1.dist)
+    conn, intensity = integ._light_from(scene, emitter, u2, verts[-1], y, conn)
     tr = integ._ratio_track(medium, x0, verts[0][0], sampler, conn)
     for i, inside in enumerate(chain.sides(kinds)[1:], start=1):
         if inside:                                             # the segment into vertex i runs in the medium
