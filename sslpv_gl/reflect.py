@@ -1,4 +1,4 @@
-"""``boundary_reflect``: the dielectric boundary's internal reflection in SSLPV's lattice (issue 28, Sec. 3).
+"""``boundary_reflect``: the dielectric boundary's internal reflection in SSLPV's lattice.
 
 Borlum et al. (HPG 2011) weight the light entering the object by the Fresnel transmittance
 (Eq. 1) and the light leaving it by the transmittance towards the eye (Eq. 4), but every
