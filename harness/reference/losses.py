@@ -165,7 +165,7 @@ def channel_loss(losses, name):
     return ch["lost_image_share"], "image light of the connections not made"
 
 
-def _decided(losses, name, limit):
+def _decided(losses, name):
     """``(loss, se)`` of a channel as judged: the first-scattered light missed with its standard error where it
     is the larger loss, else the lost image share (whose light estimate has no bias toward exact)."""
     loss, which = channel_loss(losses, name)
@@ -181,13 +181,13 @@ def verdict(losses, target_rel_se):
     and judged not exact (the reason says so)."""
     limit = LOSS_FRACTION_OF_TARGET * float(target_rel_se)
     def upper(c):
-        loss, se = _decided(losses, c, limit)
+        loss, se = _decided(losses, c)
         return loss + DECIDED_SE * se
 
     name = max(losses["channels"], key=upper)
     ch = losses["channels"][name]
     loss, which = channel_loss(losses, name)
-    _, se = _decided(losses, name, limit)
+    _, se = _decided(losses, name)
     fs = losses.get("first_scatter")
     refl = f", {fs['reflection_share']['RGB'.index(name)]:.2%} of it through reflections" if fs else ""
     pm = f" ± {se:.2%}" if se else ""

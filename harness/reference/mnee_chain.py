@@ -99,11 +99,6 @@ def v_sub(a, b):
 
 # --------------------------------------------------------------------------- the constraint and its blocks
 
-def indices(i, eta):
-    """``(eta_a, eta_b)``: index on the ``x0`` side and on the light's side of vertex ``i`` (0-based)."""
-    return (eta, 1.0) if i % 2 == 0 else (1.0, eta)
-
-
 #: Vertex kinds of a typed chain (:mod:`harness.reference.mnee_sms`): a refraction, a reflection inside the
 #: medium, a reflection off the outside of the object.
 KINDS = ("T", "R", "r")
@@ -275,15 +270,23 @@ def chain_geometry(omega, dist, verts, y, eta, kinds=None):
     return dr.select(dr.abs(det) > MIN_DET, g, 0.0), C, aux
 
 
-def chain_fresnel(verts, aux, eta):
-    """``prod_i (1 - F_i)``: unpolarised Fresnel transmittance at every vertex, cosine on the air side."""
+def chain_fresnel(verts, aux, eta, kinds=None):
+    """``prod_i``: the unpolarised Fresnel transmittance ``1 - F_i`` at a refraction (cosine on the air side)
+    and the reflectance ``F_i`` at a reflection (from inside: total internal reflection included);
+    ``kinds`` as in :func:`chain_blocks`."""
     tf = mi.Float(1.0)
-    for i in range(len(verts)):
+    kinds = kinds or alternating(len(verts))
+    for i, (kind, inside) in enumerate(zip(kinds, sides(kinds))):
         n = verts[i][1]
-        # Odd vertices (0-based even) leave the medium toward the light: air on the light side.
-        w_air = aux["wb"][i] if i % 2 == 0 else aux["wa"][i]
-        fr, _, _, _ = mi.fresnel(dr.abs(dr.dot(n, w_air)), eta)
-        tf = tf * (1.0 - fr)
+        if kind == "T":
+            # leaving the medium (inside before it), the air is on the light's side
+            w_air = aux["wb"][i] if inside else aux["wa"][i]
+            fr, _, _, _ = mi.fresnel(dr.abs(dr.dot(n, w_air)), eta)
+            tf = tf * (1.0 - fr)
+        else:
+            cos = dr.abs(dr.dot(n, aux["wa"][i]))
+            fr, _, _, _ = mi.fresnel(-cos if inside else cos, eta)
+            tf = tf * fr
     return tf
 
 

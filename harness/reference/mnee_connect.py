@@ -249,6 +249,16 @@ class ManifoldConnections(mi.SamplingIntegrator):
         ds1, em1 = emitter.sample_direction(it, u2, conn)
         return conn, em1 * dr.square(ds1.dist)       # point/spot value is I(w) / r^2 (pdf 1)
 
+    def _chain_transmittance(self, medium, x0, verts, kinds, sampler, conn):
+        """Ratio-tracked transmittance along a chain's segments inside the medium: ``x0 -> x1`` and each segment
+        into a vertex that the light reaches from inside (:func:`harness.reference.mnee_chain.sides`; for
+        refractions only, inside the other parts: entry ``i`` -> exit ``i + 1``)."""
+        tr = self._ratio_track(medium, x0, verts[0][0], sampler, conn)
+        for i, inside in enumerate(chain.sides(kinds)[1:], start=1):
+            if inside:
+                tr *= self._ratio_track(medium, verts[i - 1][0], verts[i][0], sampler, conn)
+        return tr
+
     def _chain_value(self, scene, sampler, x0, y, direction, eta, shape_id, k, emitter, u2, sel_weight, medium,
                      active):
         """A k-vertex chain (:mod:`harness.reference.mnee_chain`) from the straight seed, and its light at ``x0``.
@@ -261,9 +271,7 @@ class ManifoldConnections(mi.SamplingIntegrator):
                                                     self.newton_iterations, self.newton_tolerance, ok)
         g, _, aux = chain.chain_geometry(omega, dist, verts, y, eta)
         conn, intensity = self._light_from(scene, emitter, u2, verts[-1], y, conv & (g > 0))
-        tr = self._ratio_track(medium, x0, verts[0][0], sampler, conn)
-        for i in range(1, k - 1, 2):                          # inside the other parts: entry i -> exit i + 1
-            tr *= self._ratio_track(medium, verts[i][0], verts[i + 1][0], sampler, conn)
+        tr = self._chain_transmittance(medium, x0, verts, chain.alternating(k), sampler, conn)
         fresnel_t = chain.chain_fresnel(verts, aux, eta)
         value = dr.select(conn, sel_weight * intensity * fresnel_t * g * tr, 0.0)
         return conn, value, omega, verts[0][0]

@@ -130,22 +130,6 @@ def sided(kinds, verts, aux):
     return ok
 
 
-def typed_fresnel(kinds, verts, aux, eta):
-    """``prod_i`` of the Fresnel reflectance at a reflection and ``1 - F`` at a refraction (unpolarised)."""
-    f = mi.Float(1.0)
-    for i, (kind, inside) in enumerate(zip(kinds, chain.sides(kinds))):
-        n = verts[i][1]
-        if kind == "T":
-            w_air = aux["wb"][i] if inside else aux["wa"][i]
-            fr, _, _, _ = mi.fresnel(dr.abs(dr.dot(n, w_air)), eta)
-            f *= 1.0 - fr
-        else:
-            cos = dr.abs(dr.dot(n, aux["wa"][i]))
-            fr, _, _, _ = mi.fresnel(-cos if inside else cos, eta)   # from inside: total reflection included
-            f *= fr
-    return f
-
-
 def _same(verts, ref):
     ok = mi.Bool(True)
     for v, r in zip(verts, ref):
@@ -191,11 +175,8 @@ def sampled_value(integ, scene, sampler, x0, y, kinds, eta, shape_id, emitter, u
     if exclude is not None:
         conn &= ~(exclude[1] & _same(verts[:1], [exclude[0]]))
     conn, intensity = integ._light_from(scene, emitter, u2, verts[-1], y, conn)
-    tr = integ._ratio_track(medium, x0, verts[0][0], sampler, conn)
-    for i, inside in enumerate(chain.sides(kinds)[1:], start=1):
-        if inside:                                             # the segment into vertex i runs in the medium
-            tr *= integ._ratio_track(medium, verts[i - 1][0], verts[i][0], sampler, conn)
-    f = sel_weight * intensity * typed_fresnel(kinds, verts, aux, eta) * g * tr
+    tr = integ._chain_transmittance(medium, x0, verts, kinds, sampler, conn)
+    f = sel_weight * intensity * chain.chain_fresnel(verts, aux, eta, kinds) * g * tr
     n, capped = _trials(integ, scene, sampler, x0, y, kinds, eta, shape_id, [v[0] for v in verts], max_trials, conn)
     value = dr.select(conn, f * mi.Float(n), 0.0)
     return value, omega, conn, capped

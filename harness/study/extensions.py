@@ -33,7 +33,7 @@ the base's metric is 0 has no ratio.
 
 import statistics
 
-from harness.study.headline import _rank_value, judge_cells
+from harness.study.headline import best_cells, judge_cells
 
 #: Each extension's parameter and the paper's value of it.
 PAPER = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
@@ -75,16 +75,10 @@ def base_family(family):
 
 
 def _best(rows, budget, metric):
-    """``{(scene, family): row}``: each SSLPV family's best row per scene within the budgets."""
-    ks = {str(k) for k in budget["steps"]}
-    best = {}
-    for r in rows:
-        if r["method"] != "sslpv" or r["N"] != budget["grid"] or r["K"] not in ks:
-            continue
-        key = (r["scene"], r["family"])
-        if key not in best or _rank_value(r, metric) < _rank_value(best[key], metric):
-            best[key] = r
-    return best
+    """``{(scene, family): row}``: each SSLPV family's best row per scene within the budgets (the headline's
+    :func:`~harness.study.headline.best_cells`)."""
+    _, overall = best_cells(rows, budget, metric)
+    return {(s, f): r for s, cells in overall.items() for f, r in cells.items() if r["method"] == "sslpv"}
 
 
 def _outcome(ext, base):
@@ -144,10 +138,12 @@ def effects(rows, budget, metrics, significance, images=None):
 
 def default_outside(found):
     """``{"outside", "median_ratio", "by_mode"}``: the outside treatment for the extensions (module docstring)."""
+    from sslpv_gl.boundary import OUTSIDE_MODES
+
     pooled = {}
     for f in found["families"]:
         tags = f["family"].split(SEPARATOR)[1:]
-        if len(tags) != 1 or tags[0] not in ("interior", "absorb", "extrapolated", "material"):
+        if len(tags) != 1 or tags[0] not in OUTSIDE_MODES:
             continue
         pooled.setdefault(tags[0], []).extend(c["ratio"] for c in f["cells"].values() if c["ratio"] is not None)
     by_mode = {m: statistics.median(v) for m, v in pooled.items() if v}

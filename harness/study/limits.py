@@ -74,7 +74,9 @@ def _outside(rows, subject):
         out["why"] = "the renderer recorded no outside share for this row"
     p = json.loads(subject["params_json"])
     others = []
-    for mode in ("vacuum", "material", "absorb", "extrapolated", "interior"):
+    from sslpv_gl.boundary import OUTSIDE_MODES
+
+    for mode in OUTSIDE_MODES:
         if mode != p.get("outside"):
             r = _same_but(rows, subject, outside=mode)
             if r is not None:
