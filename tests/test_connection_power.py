@@ -46,6 +46,25 @@ def test_delivered_on_a_convex_sphere_is_the_direct_light(mi):
     assert np.all(np.abs(ratio - 1) <= 0.015 + 3 * rse), f"delivered / direct {ratio} +- {rse}"
 
 
+def test_delivered_standard_error_matches_its_spread(mi):
+    """The stated standard error against the spread over eight seeds on the skin torus behind its dielectric (the
+    exactness verdict decides by it): points inside the mesh, so that no zeros outside inflate the variance, and
+    the volume they stand for exact (the mesh's, by the divergence theorem)."""
+    from harness.reference import connection_power
+    from harness.scene import load_scene
+
+    scene = load_scene("skin_torus_dielectric")
+    scene = dataclasses.replace(scene, boundary=dataclasses.replace(scene.boundary, sms_trials=0))
+    runs = [connection_power.delivered(scene, points=1 << 15, seed=s) for s in range(8)]
+    got = np.array([r[0] for r in runs])
+    stated, spread = np.mean([r[1] for r in runs], axis=0), got.std(0, ddof=1)
+    share = runs[0][2]
+    print(f"skin torus, 32768 points: stated SE / spread over 8 seeds {np.round(stated / spread, 3)}; relative SE "
+          f"{np.round(stated / got.mean(0), 4)}; share of the box inside {share:.3f}")
+    assert 0.05 < share < 0.5, "the torus no longer fills a small part of its box"
+    assert np.all((stated / spread > 0.5) & (stated / spread < 2.0)), f"stated {stated} against spread {spread}"
+
+
 @pytest.mark.slow
 def test_area_light_limit_through_the_hole_matches_the_counted_loss(mi):
     from harness.reference import losses, nonconvex

@@ -352,6 +352,20 @@ class TestReporting:
         # the SE reaches a quarter of the limit (about 1,500 batches; capped at 1,000)
         assert len(calls) == 5
 
+    def test_first_scatter_counts_the_tracers_noise(self, monkeypatch):
+        """The missed share's standard error holds the traced total's (``total_se``) beside the delivered power's."""
+        from harness.reference import connection_power, losses, specular_paths
+
+        traced = {"by_class": {"direct": np.full(3, 2.0)}, "by_label": {"E": np.full(3, 2.0)},
+                  "total_se": np.full(3, 0.03)}
+        monkeypatch.setattr(specular_paths, "trace", lambda *a, **k: traced)
+        monkeypatch.setattr(connection_power, "delivered",
+                            lambda scene, points, seed, variant: (np.full(3, 1.9), np.full(3, 0.02), 0.5))
+        scene = type("S", (), {"boundary": Boundary("dielectric", 1.4, 0.0)})()
+        fs = losses.first_scatter(scene, points=1000)
+        want = np.hypot(0.02 / 2.0, 1.9 * 0.03 / 4.0)
+        assert fs["missed_share_se"][0] == pytest.approx(want) and fs["traced_se"][0] == pytest.approx(0.03)
+
     def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
         import json
 

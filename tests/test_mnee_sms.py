@@ -8,6 +8,11 @@ vertex and the further solutions of a refraction, each against an independent ro
   ``("R", "T")``'s estimate, averaged over 2,048 samples at each of six points, must agree within 4 standard
   errors at every point and channel, at eta 1.33 and 1.5; the same estimates against the NumPy value with
   the Fresnel *transmittance* at the reflection must not (planted error).
+* **The outside reflection chain against the mirrored light.** With a second dielectric part above the light
+  (one mesh of two boxes), the light that reflects off that part's lower face and enters the slab is the
+  half-space's single refraction from the light mirrored in that face, times the Fresnel reflectance there
+  (``reflected_irradiance(..., ceiling=)``); the chain ``("T", "r")`` must agree within 4 standard errors
+  at eta 1.33 and 1.5, with half its seeds traced from the light and with all of them (``LIGHT_SIDE_SHARE``).
 * **One solution is not counted twice.** On the slab the single refraction has one solution, which the
   straight seed's walk already connects: the sampled further refractions (``("T",)``) deliver exactly 0.
 * **Bad input:** a chain that ends inside the medium or names an unknown kind, and ``sms_trials`` outside
@@ -67,6 +72,42 @@ def test_reflection_chain_against_the_mirror_point(mi, eta):
           f"reflection) min |z| {np.abs(zw).min():.0f}")
     assert np.all(ref > 0) and np.all(found > 0.02), "the slab no longer exercises the reflection chain"
     assert np.abs(z).max() <= 4.0, f"reflection chain disagrees with the mirror point: z {np.round(z, 2).tolist()}"
+    assert np.abs(zw).min() > 8.0, "a reflection weighted by the transmittance would go unnoticed"
+
+
+def _ceiling(eta):
+    """The slab with a second dielectric part above the light (``y`` in ``[2, 3]``): one mesh of two boxes."""
+    from harness.reference import halfspace
+
+    setup = dict(halfspace.SETUP, half_width=50.0, depth=1.0, light=(0.3, 1.0, 0.2), slab=CEILING)
+    return halfspace.validation_scene(eta, size=4, setup=setup), setup
+
+
+#: The ceiling part ``(y, thickness, z0, z1)`` of :func:`_ceiling` (``harness.reference.halfspace._slab_box``).
+CEILING = (2.0, 1.0, -50.0, 50.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("eta,share", [(1.33, 0.5), (1.5, 0.5), (1.5, 1.0)])
+def test_outside_reflection_chain_against_the_mirrored_light(mi, eta, share, monkeypatch):
+    """``("T", "r")``: the light reflects off the ceiling outside, then enters the slab; the ceiling mirrors the
+    light. ``share = 1`` takes every seed from the light's side (:func:`harness.reference.mnee_sms.seed_from_light`)."""
+    from harness.reference import halfspace, mnee_sms
+
+    monkeypatch.setattr(mnee_sms, "LIGHT_SIDE_SHARE", share)
+    scene, setup = _ceiling(eta)
+    v = _sampled(scene, "Tr")[-1]
+    mean, se = v.mean(1), v.std(1, ddof=1) / np.sqrt(v.shape[1])
+    args = (POINTS, setup["light"], setup["intensity"], eta, setup["sigma_t"], 1.0)
+    ref = halfspace.reflected_irradiance(*args, ceiling=CEILING[0])
+    wrong = halfspace.reflected_irradiance(*args, fresnel="transmit", ceiling=CEILING[0])
+    z, zw = (mean - ref) / se, (mean - wrong) / se
+    found = (v[..., 0] > 0).mean(1)
+    print(f"eta {eta}, light-side share {share}: outside reflection chain / mirrored light "
+          f"{np.round(mean / ref, 3).tolist()}, max |z| {np.abs(z).max():.2f}; found by the first walk "
+          f"{np.round(found, 3).tolist()}; planted (1 - F at the reflection) min |z| {np.abs(zw).min():.0f}")
+    assert np.all(ref > 0) and np.all(found > 0.02), "the ceiling no longer exercises the outside reflection chain"
+    assert np.abs(z).max() <= 4.0, f"outside reflection chain against the mirrored light: z {np.round(z, 2).tolist()}"
     assert np.abs(zw).min() > 8.0, "a reflection weighted by the transmittance would go unnoticed"
 
 

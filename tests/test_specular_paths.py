@@ -88,3 +88,19 @@ def test_path_classes():
 
     assert [path_class(s) for s in ("E", "ETE", "ETETE", "ER", "rE", "ETRE")] == [
         "direct", "chain3", "chain5", "reflection", "reflection", "reflection"]
+
+
+def test_tracer_standard_error_matches_its_spread(mi):
+    """``total_se`` (collapsed pairs of the cone's strata) against the spread of the total over eight seeds: the
+    exactness verdict (:mod:`harness.reference.losses`) adds it to the delivered power's, so it must neither
+    vanish nor overstate (the spread of eight totals is itself uncertain by about a quarter)."""
+    from harness.reference import specular_paths
+
+    scene = thin_sphere()
+    runs = [specular_paths.trace(scene, photons=1 << 12, seed=s) for s in range(8)]
+    totals = np.array([sum(r["by_class"].values()) for r in runs])
+    stated = np.mean([r["total_se"] for r in runs], axis=0)
+    spread = totals.std(0, ddof=1)
+    print(f"sphere, 4096 photons: stated SE / spread over 8 seeds {np.round(stated / spread, 3)}")
+    assert np.all(stated > 0), "the tracer states no standard error"
+    assert np.all((stated / spread > 0.5) & (stated / spread < 2.5)), f"stated {stated} against spread {spread}"

@@ -281,24 +281,32 @@ def slab_outside_share(scene, setup=SLAB_SETUP, sub=2, nodes=32):
     return float((w * out).sum() / w.sum())
 
 
-def reflected_irradiance(points, light_pos, intensity, eta, sigma_t, thickness, fresnel="reflect"):
+def reflected_irradiance(points, light_pos, intensity, eta, sigma_t, thickness, fresnel="reflect", ceiling=None):
     """Irradiance per point (P, 3) at ``points`` (P, 3) inside a slab ``-thickness < y < 0`` (flat smooth
     faces, air above and below) from a point light above it, along the light path that enters the top
-    face, reflects off the bottom face inside and reaches the point (the photon label ``ER``).
+    face, reflects off the bottom face inside and reaches the point (the photon label ``ER``); with
+    ``ceiling = H`` (the flat lower face ``y = H`` of another dielectric part above the light), along the path
+    that reflects off that face outside, then enters the top face (``rE``).
 
     The bottom face mirrors the point to depth ``2 thickness - z``: the path is the half-space's single
     refraction to the mirror point (every angle in the medium is the same at both faces), so the ray
     tube's irradiance is the half-space's at that depth (module docstring) times the Fresnel
     transmittance at the top, the Fresnel reflectance at the bottom (the same angles, so ``1 - T``:
     below the critical angle inside), and the transmittance along ``(2 thickness - z) / cos th_i``.
-    Another route to the value of ``mneevolpath``'s reflection chain ``("R", "T")``
-    (:mod:`harness.reference.mnee_sms`). ``fresnel = "transmit"`` plants the error of a reflection
-    weighted by the transmittance.
+    The ceiling mirrors the light instead, to height ``2 H - h``: the half-space's single refraction from
+    the mirrored light, times the Fresnel reflectance at the ceiling, whose angle in air is the top face's
+    (``1 - T`` again). Another route to the value of ``mneevolpath``'s reflection chains ``("R", "T")``
+    and ``("T", "r")`` (:mod:`harness.reference.mnee_sms`). ``fresnel = "transmit"`` plants the error of a
+    reflection weighted by the transmittance.
     """
     pts = np.asarray(points, float)
     light = np.asarray(light_pos, float)
-    h = light[1]
-    z = 2.0 * thickness + pts[:, 1]                            # the mirror point's depth
+    if ceiling is None:
+        h = light[1]
+        z = 2.0 * thickness + pts[:, 1]                        # the mirror point's depth
+    else:
+        h = 2.0 * float(ceiling) - light[1]                    # the mirrored light's height
+        z = -pts[:, 1]
     rho = np.linalg.norm(pts[:, [0, 2]] - light[[0, 2]], axis=1)
     th_i = refraction_angle(rho, z, h, eta)
     sin_i, cos_i = np.sin(th_i), np.cos(th_i)

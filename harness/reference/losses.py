@@ -26,7 +26,7 @@ reference's size) and returns, per colour channel:
   way, which only the sampled chains of ``[boundary] sms_trials`` make), against the same power
   as the connections deliver it (:func:`harness.reference.connection_power.delivered`,
   :data:`DELIVERED_POINTS` points):
-  ``missed_share = 1 - delivered / traced`` and its standard error. It counts every loss of the
+  ``missed_share = 1 - delivered / traced`` and its standard error (both routes' noise). It counts every loss of the
   connections at once: reflection vertices, single walks that end on another (occluded)
   solution than the one that carries the light, chains the straight seed does not lead to.
 
@@ -43,11 +43,11 @@ reference inexact). ``missed_share`` weighs the medium by where light first scat
 what the camera sees, and is a share of that light, not of the image (on the torus lit through
 its hole the image's shortfall in the area-light limit is 0.03-0.08 larger than this one
 predicts, about 2 SE per channel: ``docs/benchmarks/mnee_chains.md``); it covers point lights
-only, and its standard error (``DELIVERED_POINTS``, about 1 % on the suite's tori) is of the
-order of the limit it is judged against, so a loss near that limit may be called either way;
-the delivered power's spread over seeds is 1 to 1.7 times the standard error it states (the
-fluence near the lit surface is heavy-tailed; six seeds on ``jade_backlit_dielectric``,
-``skin_torus_dielectric`` and ``torus_hole``).
+only. Its standard error holds both routes' noise: the delivered power's over points drawn inside
+the mesh, and the traced total's over the photons' stratified directions (each checked against the
+spread over seeds: ``tests/test_connection_power.py``, ``tests/test_specular_paths.py``). A loss
+within :data:`DECIDED_SE` standard errors of the limit after :data:`MAX_DELIVERED_POINTS` points is
+"undecided" and judged not exact.
 """
 
 import json
@@ -65,7 +65,7 @@ LOSS_FRACTION_OF_TARGET = 0.25
 #: Set to 1 to judge against a reference that says it is not exact (explicit opt-in).
 ALLOW_ENV = "SSLPV_ALLOW_INEXACT_REFERENCE"
 BINS = ("1", "3", "5", ">=7")
-TRACE_PHOTONS = 1 << 16
+TRACE_PHOTONS = 1 << 20
 DELIVERED_POINTS = 1 << 18
 #: The delivered power is measured in batches of DELIVERED_POINTS until its standard error is at most a
 #: quarter of the limit it is judged against, or until this many points.
@@ -131,6 +131,11 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
     part = specular_paths.shares(traced, int(scene.boundary.max_crossings))
     total = part["total"]
     safe = np.where(total > 0, total, 1.0)
+    total_se = np.asarray(traced.get("total_se", np.zeros(3)), float)
+
+    def missed_se(got, se):
+        """The standard error of ``1 - got / total``: the delivered power's and the traced total's."""
+        return np.sqrt(np.square(se / safe) + np.square(got * total_se / safe ** 2))
     batches = [connection_power.delivered(scene, points=points, seed=seed, variant=variant)[:2]]
 
     def pooled():
@@ -138,7 +143,7 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
 
     def undecided():
         got, se = pooled()
-        missed, m_se = np.where(total > 0, 1.0 - got / safe, 0.0), se / safe
+        missed, m_se = np.where(total > 0, 1.0 - got / safe, 0.0), missed_se(got, se)
         open_ = (missed - DECIDED_SE * m_se <= limit) & (missed + DECIDED_SE * m_se > limit)
         return bool(np.any(open_)) and float(np.max(m_se)) > limit / 4
 
@@ -150,7 +155,7 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
             "traced": {k: v.tolist() for k, v in traced["by_class"].items()},
             "delivered": got.tolist(), "delivered_se": se.tolist(),
             "missed_share": np.where(total > 0, 1.0 - got / safe, 0.0).tolist(),
-            "missed_share_se": (se / safe).tolist(),
+            "missed_share_se": missed_se(got, se).tolist(), "traced_se": total_se.tolist(),
             "reflection_share": part["reflection"].tolist(),
             "chains_over_max_share": part["chains_over_max"].tolist()}
 

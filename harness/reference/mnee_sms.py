@@ -12,7 +12,11 @@ Caustics and Glints", SIGGRAPH 2020, Sec. 4-5):
 1. **Random seed.** A direction ``d`` uniform on the sphere around ``x0``; the seed path follows it
    specularly through the vertex kinds of the chain (``T`` a refraction, ``R`` a reflection inside
    the medium, ``r`` a reflection off the outside; :data:`harness.reference.mnee_chain.KINDS`):
-   reflect or refract at each boundary hit (total internal reflection ends a ``T`` seed).
+   reflect or refract at each boundary hit (total internal reflection ends a ``T`` seed). For a chain
+   with a reflection off the outside, half the seeds (:data:`LIGHT_SIDE_SHARE`) are traced from the
+   light instead, uniform in the cone that holds the object (:func:`seed_from_light`): the light such a
+   chain carries mostly grazes the reflecting part (Fresnel reflectance is large only there), a basin
+   that directions from ``x0`` rarely find.
 2. **Newton walk** on the chain's constraint from that seed (:func:`harness.reference.mnee_chain.walk_chain`
    with the kinds: the half vector with the indices of both sides, so a reflection has the same
    index on both), to a solution ``X`` whose every vertex is reflected or refracted on the side its
@@ -29,10 +33,9 @@ Caustics and Glints", SIGGRAPH 2020, Sec. 4-5):
    counted.
 
 Measured against the photon tracer, label by label, by ``benchmarks/mnee_sms.py``
-(``docs/benchmarks/mnee_sms.md``: on the torus lit through its hole the sampled chains bring the
-delivered first-scattered power to the traced one within its standard error; on the scanned bunny
-the chain ``Tr`` delivers about a third of its label's power at a cap of 1024, a basin that uniform
-seeds rarely find); against the mirror point in a slab by ``tests/test_mnee_sms.py``.
+(``docs/benchmarks/mnee_sms.md``: the torus lit through its hole, and the scanned bunny, whose light
+reflected off its body into its ears is the chain ``Tr``); against the mirror point in a slab
+(``R T``) and the mirrored light under a second part (``T r``) by ``tests/test_mnee_sms.py``.
 
 For the single refraction the solution the straight seed leads to is already connected
 (:mod:`harness.reference.mnee`), so a random walk that ends there contributes nothing (``exclude``):
@@ -100,18 +103,8 @@ def seed_path(scene, x0, d, kinds, eta, shape_id, active):
         verts.append(chain.vertex_of(si))
         if i == 0:
             dist = mi.Float(si.t)
-        n = si.sh_frame.n
-        wi = -ray.d
-        if kind == "T":
-            # from inside the relative index is eta -> 1: sin_t = eta sin_i, about the normal facing wi
-            r = eta if inside[i] else 1.0 / eta
-            nn = -n if inside[i] else n
-            c = dr.dot(nn, wi)
-            k2 = 1.0 - dr.square(r) * (1.0 - dr.square(c))
-            ok &= k2 > 0.0
-            new = dr.normalize(-r * wi + (r * c - dr.sqrt(dr.maximum(k2, 0.0))) * nn)
-        else:
-            new = 2.0 * dr.dot(n, wi) * n - wi
+        new, bent = _bend(kind, si.sh_frame.n, -ray.d, inside[i], eta)
+        ok &= bent
         ray = si.spawn_ray(new)
     return verts, dist, ok
 
@@ -137,10 +130,84 @@ def _same(verts, ref):
     return ok
 
 
+def _bend(kind, n, wi, arrive_inside, eta):
+    """The specular direction leaving a vertex of ``kind`` hit along ``-wi`` from inside (``arrive_inside``) or
+    outside: ``(direction, ok)`` (a refraction is not ok beyond the critical angle)."""
+    if kind != "T":
+        return 2.0 * dr.dot(n, wi) * n - wi, mi.Bool(True)
+    # sin_t = r sin_i with r the index the ray comes from over the one it enters, about the normal facing wi
+    r = eta if arrive_inside else 1.0 / eta
+    nn = -n if arrive_inside else n
+    c = dr.dot(nn, wi)
+    k2 = 1.0 - dr.square(r) * (1.0 - dr.square(c))
+    return dr.normalize(-r * wi + (r * c - dr.sqrt(dr.maximum(k2, 0.0))) * nn), k2 > 0.0
+
+
+def seed_from_light(scene, x0, y, u, kinds, eta, shape_id, active):
+    """A seed traced from the light (step 1, the light's side): ``(verts, omega, dist, ok)``.
+
+    A direction ``u`` uniform in the cone from ``y`` that holds the scene's bounding sphere is followed
+    specularly through ``kinds`` read from the light; the seed the walk takes is then the path from ``x0``
+    toward those vertices' positions, each the first surface hit on the way (as a walk's step projects).
+    """
+    sphere = scene.bbox().bounding_sphere()
+    to_c = mi.Vector3f(sphere.center) - y
+    dist_c = dr.norm(to_c)
+    cos_max = dr.sqrt(dr.maximum(1.0 - dr.square(sphere.radius / dist_c), 0.0))
+    cos_max = dr.select(dist_c > sphere.radius, cos_max, -1.0)
+    d = mi.Frame3f(to_c / dist_c).to_world(mi.warp.square_to_uniform_cone(u, cos_max))
+    inside = chain.sides(kinds)
+    ray = mi.Ray3f(y, d)
+    ok = mi.Bool(active)
+    pos = [None] * len(kinds)
+    for i in reversed(range(len(kinds))):
+        arrive_inside = inside[i] != (kinds[i] == "T")        # the vertex's light side
+        si = scene.ray_intersect(ray, chain.WALK_FLAGS, ok)
+        ok &= si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == shape_id) & chain._oriented(
+            arrive_inside, si, ray.d)
+        pos[i] = mi.Point3f(si.p)
+        new, bent = _bend(kinds[i], si.sh_frame.n, -ray.d, arrive_inside, eta)
+        ok &= bent
+        ray = si.spawn_ray(new)
+    rel = pos[0] - x0
+    dist = dr.norm(rel)
+    verts = [[p] for p in pos]
+    zero = [mi.Vector3f(0.0)] * len(kinds)
+    verts, omega, dist, ok = chain._project(scene, x0, rel / dist, dist, verts, zero, mi.Float(0.0), shape_id, y, ok,
+                                            inside)
+    return verts, omega, dist, ok
+
+
+#: The share of a :func:`light_seeded` chain's seeds traced from the light.
+LIGHT_SIDE_SHARE = 0.5
+
+
+def light_seeded(kinds):
+    """Whether a chain's seeds come partly (:data:`LIGHT_SIDE_SHARE`) from the light's side: chains with a
+    reflection off the outside (module docstring, step 1)."""
+    return "r" in kinds
+
+
 def _walk_from(integ, scene, sampler, x0, y, kinds, eta, shape_id, active):
-    """A random seed (step 1) and its walk (step 2): ``(converged, verts, omega, dist)``."""
+    """A random seed (step 1) and its walk (step 2): ``(converged, verts, omega, dist)``.
+
+    The seed is a uniform direction from ``x0`` (:func:`seed_path`); for :func:`light_seeded` chains it is,
+    with probability :data:`LIGHT_SIDE_SHARE`, a path traced from the light instead (:func:`seed_from_light`).
+    The Bernoulli trials draw from the same mixture, so ``N`` still estimates ``1 / p(X)`` of the mixture
+    (step 4)."""
     d = mi.warp.square_to_uniform_sphere(sampler.next_2d(active))
-    verts, dist, ok = seed_path(scene, x0, d, kinds, eta, shape_id, active)
+    if not light_seeded(kinds):
+        verts, dist, ok = seed_path(scene, x0, d, kinds, eta, shape_id, active)
+        return chain.walk_chain(scene, x0, y, verts, d, dist, eta, shape_id, integ.newton_iterations,
+                                integ.newton_tolerance, ok, kinds)
+    from_light = active & (sampler.next_1d(active) < LIGHT_SIDE_SHARE)
+    verts, dist, ok = seed_path(scene, x0, d, kinds, eta, shape_id, active & ~from_light)
+    lverts, lomega, ldist, lok = seed_from_light(scene, x0, y, sampler.next_2d(active), kinds, eta, shape_id,
+                                                 from_light)
+    verts = [[dr.select(from_light, b, a) for a, b in zip(va, vb)] for va, vb in zip(verts, lverts)]
+    d = dr.select(from_light, lomega, d)
+    dist = dr.select(from_light, ldist, dist)
+    ok = dr.select(from_light, lok, ok)
     return chain.walk_chain(scene, x0, y, verts, d, dist, eta, shape_id, integ.newton_iterations,
                             integ.newton_tolerance, ok, kinds)
 

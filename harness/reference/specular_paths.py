@@ -142,7 +142,9 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
     ``eta`` defaults to the scene's boundary index. Mitsuba's variant must be set
     (:func:`harness.reference.mitsuba_scene.use_variant`). Returns ``{"by_label": {label:
     (3,)}, "by_class": {class: (3,)}, "truncated": (3,), "cut": (3,), "leaked": (3,), "photons": n}``
-    (``leaked``: weight of rays that left the object through a grazing hit without a surface, dropped).
+    (``leaked``: weight of rays that left the object through a grazing hit without a surface, dropped),
+    and ``total_se`` (3,): the standard error of the total first-scattered power (each photon's deposits,
+    all its branches together, are one sample of its stratum of the cone; collapsed pairs of strata).
     """
     eta = float(scene.boundary.eta if eta is None else eta)
     cast = _Caster(scene.mesh)
@@ -151,6 +153,7 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
     center = 0.5 * (v.min(0) + v.max(0))
     radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.001
     by_label, truncated, cut, leaked = {}, np.zeros(3), np.zeros(3), np.zeros(3)
+    variance = np.zeros(3)
     for light in scene.lights:
         y = np.asarray(light.position, np.float64)
         d, omega = _cone_directions(y, center, radius, photons, rng)
@@ -159,6 +162,8 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
         w0 = w.max(1)
         inside = np.zeros(photons, bool)
         labels = np.array([""] * photons, dtype=object)
+        pid = np.arange(photons)                 # the photon each branch came from
+        per_photon = np.zeros((photons, 3))
         for event in range(max_events + 1):
             if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
                 break
@@ -167,12 +172,14 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
             # refracts it to the geometric surface's other side): dropped, its weight reported as leaked.
             leaked += w[inside & ~valid].sum(0)
             keep = valid
-            o, d, w, w0, inside, labels, t, p, n = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n))
+            o, d, w, w0, inside, labels, t, p, n, pid = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, pid))
             if inside.any():
                 dep, tr = _segment(scene.medium, o[inside], d[inside], t[inside])
+                power = w[inside] * dep
+                np.add.at(per_photon, pid[inside], power)
                 for lab in np.unique(labels[inside]):
                     m = labels[inside] == lab
-                    by_label[lab] = by_label.get(lab, np.zeros(3)) + (w[inside][m] * dep[m]).sum(0)
+                    by_label[lab] = by_label.get(lab, np.zeros(3)) + power[m].sum(0)
                 w[inside] = w[inside] * tr
             if event == max_events:
                 truncated += w.sum(0)
@@ -197,11 +204,16 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
             w0 = np.concatenate([w0[mr], w0[mt]])
             inside = np.concatenate([inside[mr], ~inside[mt]])
             labels = np.concatenate([lab_r[mr], lab_t[mt]])
+            pid = np.concatenate([pid[mr], pid[mt]])
+        # The directions are stratified (one per ring of the cone): the variance of the sum by collapsed
+        # strata, each pair of neighbouring rings one stratum of two samples (conservative).
+        half = photons // 2
+        variance += np.square(per_photon[0:2 * half:2] - per_photon[1:2 * half:2]).sum(0)
     by_class = {}
     for lab, val in by_label.items():
         by_class[path_class(lab)] = by_class.get(path_class(lab), np.zeros(3)) + val
     return {"by_label": by_label, "by_class": by_class, "truncated": truncated, "cut": cut, "leaked": leaked,
-            "photons": photons}
+            "photons": photons, "total_se": np.sqrt(variance)}
 
 
 def shares(traced, max_crossings):
