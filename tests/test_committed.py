@@ -59,3 +59,30 @@ def test_small_in_sweep_json_and_nightly_matrix(tmp_path):
     m = tmp_path / "m.toml"
     m.write_text('scenes = ["wide_slab"]\nsize = "small"\n[params]\ngrid = [8]\n')
     assert load_matrix(m)["size"] == "small"
+
+
+def test_smooth_dielectric_references_are_exact_and_rendered_as_their_scene_says():
+    """A suite scene behind a smooth dielectric keeps a committed reference whose ``reference.json`` says
+    ``"exact": true`` (the exactness verdict, :mod:`harness.reference.losses`), rendered with the connections its
+    scene names: ``max_crossings`` and ``sms_trials`` leave the content hash alone at their defaults, so a
+    reference rendered before they existed (no ``max_crossings`` in its integrator: one crossing) would pass the
+    hash check unnoticed."""
+    import json
+
+    checked = []
+    for name in list_scenes():
+        scene = load_scene(name)
+        b = scene.boundary
+        if b.kind != "dielectric" or b.roughness != 0.0:
+            continue
+        ref = find_committed_reference(small_scene(scene))
+        meta = json.loads((ref / "reference.json").read_text())
+        assert meta.get("exact") is True, f"{name}: {meta.get('exact_note', 'no exactness verdict recorded')}"
+        integ = meta["integrator"]
+        for d in (integ.values() if "type" not in integ else [integ]):
+            assert int(d.get("max_crossings", 1)) == b.max_crossings, f"{name}: rendered with {d}"
+            assert int(d.get("sms_trials", 0)) == b.sms_trials, f"{name}: rendered with {d}"
+            if b.sms_trials:
+                assert d.get("sms_chains") == b.sms_chains, f"{name}: rendered with {d}"
+        checked.append(name)
+    assert len(checked) >= 2, f"the suite's smooth-dielectric scenes: {checked}"
