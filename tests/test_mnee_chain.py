@@ -366,6 +366,33 @@ class TestReporting:
         want = np.hypot(0.02 / 2.0, 1.9 * 0.03 / 4.0)
         assert fs["missed_share_se"][0] == pytest.approx(want) and fs["traced_se"][0] == pytest.approx(0.03)
 
+    def test_first_scatter_traces_photons_until_their_noise_is_small(self, monkeypatch):
+        """Photon batches (new seeds) are pooled while the traced total's relative SE exceeds an eighth of the limit,
+        up to ``max_photons``; without a limit, one batch."""
+        from harness.reference import connection_power, losses, specular_paths
+
+        seeds = []
+
+        def fake_trace(scene, photons, seed):
+            seeds.append(seed)
+            return {"by_class": {"direct": np.full(3, 2.0)}, "by_label": {"E": np.full(3, 2.0)},
+                    "total_se": np.full(3, 0.019)}                       # 0.95 % of the total per batch
+
+        monkeypatch.setattr(specular_paths, "trace", fake_trace)
+        monkeypatch.setattr(connection_power, "delivered",
+                            lambda scene, points, seed, variant: (np.full(3, 1.9), np.full(3, 1e-4), 0.5))
+        scene = type("S", (), {"boundary": Boundary("dielectric", 1.4, 0.0)})()
+        fs = losses.first_scatter(scene, photons=10, points=1000, limit=0.02, max_photons=10 ** 6)
+        # 0.95 % / sqrt(n) <= 0.25 % from n = 15
+        assert len(seeds) == 15 and len(set(seeds)) == 15 and fs["photons"] == 150
+        assert fs["traced_se"][0] == pytest.approx(0.019 / np.sqrt(15))
+        seeds.clear()
+        losses.first_scatter(scene, photons=10, points=1000, limit=0.02, max_photons=40)
+        assert len(seeds) == 4                                           # the cap on photons
+        seeds.clear()
+        losses.first_scatter(scene, photons=10, points=1000)
+        assert len(seeds) == 1                                           # no limit: one batch
+
     def test_inexact_reference_is_refused_without_the_opt_in(self, tmp_path, monkeypatch):
         import json
 

@@ -21,7 +21,7 @@ reference's size) and returns, per colour channel:
   lost connections over the image's light;
 * ``first_scatter``: the power that first scatters in the medium, traced from the point lights
   through every specular path (:func:`harness.reference.specular_paths.trace`, an independent
-  route: :data:`TRACE_PHOTONS` photons), by class (``direct``: one refraction; ``chain3``,
+  route: batches of :data:`TRACE_PHOTONS` photons), by class (``direct``: one refraction; ``chain3``,
   ``chain5`` ...: through other parts of the object; ``reflection``: any reflection on the
   way, which only the sampled chains of ``[boundary] sms_trials`` make), against the same power
   as the connections deliver it (:func:`harness.reference.connection_power.delivered`,
@@ -65,7 +65,10 @@ LOSS_FRACTION_OF_TARGET = 0.25
 #: Set to 1 to judge against a reference that says it is not exact (explicit opt-in).
 ALLOW_ENV = "SSLPV_ALLOW_INEXACT_REFERENCE"
 BINS = ("1", "3", "5", ">=7")
-TRACE_PHOTONS = 1 << 20
+TRACE_PHOTONS = 1 << 16
+#: With a limit, photons are traced in batches of TRACE_PHOTONS until the traced total's standard error is at
+#: most an eighth of the limit (relative), or until this many photons.
+MAX_TRACE_PHOTONS = 1 << 20
 DELIVERED_POINTS = 1 << 18
 #: The delivered power is measured in batches of DELIVERED_POINTS until its standard error is at most a
 #: quarter of the limit it is judged against, or until this many points.
@@ -113,8 +116,35 @@ def measure(scene, variant="llvm_ad_rgb", spp=LOSS_SPP, seeds=LOSS_SEEDS, seed_b
             "first_scatter": first_scatter(scene, variant, limit=limit)}
 
 
+def _traced(scene, photons, seed, limit, max_photons):
+    """The photon tracer's result, pooled over batches of ``photons`` (new seeds) while, with ``limit``, the traced
+    total's relative standard error exceeds ``limit / 8``, up to ``max_photons``."""
+    from harness.reference import specular_paths
+
+    batches = [specular_paths.trace(scene, photons=photons, seed=seed)]
+
+    def pooled():
+        n = len(batches)
+        out = {}
+        for key in ("by_label", "by_class"):
+            names = {k for b in batches for k in b[key]}
+            out[key] = {k: sum(b[key].get(k, np.zeros(3)) for b in batches) / n for k in names}
+        out["total_se"] = np.sqrt(sum(np.square(b.get("total_se", np.zeros(3))) for b in batches)) / n
+        out["photons"] = photons * n
+        return out
+
+    def too_noisy():
+        p = pooled()
+        total = sum(p["by_class"].values(), np.zeros(3))
+        return bool(np.any(p["total_se"] > limit / 8 * np.where(total > 0, total, np.inf)))
+
+    while limit is not None and (len(batches) + 1) * photons <= max_photons and too_noisy():
+        batches.append(specular_paths.trace(scene, photons=photons, seed=seed + 1000 + len(batches)))
+    return pooled()
+
+
 def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DELIVERED_POINTS, seed=0, limit=None,
-                  max_points=MAX_DELIVERED_POINTS):
+                  max_points=MAX_DELIVERED_POINTS, max_photons=MAX_TRACE_PHOTONS):
     """The first-scattered power traced through every specular path against what the connections deliver.
 
     Returns per channel (lists of 3): ``traced`` by class, ``delivered`` and its ``delivered_se``,
@@ -123,11 +153,12 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
     the loss is judged against), batches of ``points`` are added (new seeds, pooled) while a channel's
     missed share lies within :data:`DECIDED_SE` standard errors of the limit, until the largest
     ``missed_share_se`` is at most ``limit / 4`` or ``max_points`` points were drawn, so that
-    :func:`verdict` can decide.
+    :func:`verdict` can decide; photons are traced in batches of ``photons`` until the traced total's
+    relative standard error is at most ``limit / 8`` or ``max_photons`` were traced.
     """
     from harness.reference import connection_power, specular_paths
 
-    traced = specular_paths.trace(scene, photons=photons, seed=seed)
+    traced = _traced(scene, photons, seed, limit, max_photons)
     part = specular_paths.shares(traced, int(scene.boundary.max_crossings))
     total = part["total"]
     safe = np.where(total > 0, total, 1.0)
@@ -151,7 +182,7 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
         batches.append(connection_power.delivered(scene, points=points, seed=seed + len(batches), variant=variant)[:2])
     got, se = pooled()
     points = points * len(batches)
-    return {"photons": photons, "points": points,
+    return {"photons": traced["photons"], "points": points,
             "traced": {k: v.tolist() for k, v in traced["by_class"].items()},
             "delivered": got.tolist(), "delivered_se": se.tolist(),
             "missed_share": np.where(total > 0, 1.0 - got / safe, 0.0).tolist(),
