@@ -54,25 +54,31 @@ def _sampled(scene, chains, samples=SAMPLES):
     return [v.reshape(len(POINTS), samples, 3) for v in parts]
 
 
+def _against_mirror(scene, setup, eta, chain, what, **mirror):
+    """The sampled chain's estimate at :data:`POINTS` against ``reflected_irradiance`` (``mirror``: its
+    ``ceiling``), and against the planted Fresnel transmittance at the reflection."""
+    from harness.reference import halfspace
+
+    v = _sampled(scene, chain)[-1]
+    mean, se = v.mean(1), v.std(1, ddof=1) / np.sqrt(v.shape[1])
+    args = (POINTS, setup["light"], setup["intensity"], eta, setup["sigma_t"], 1.0)
+    ref = halfspace.reflected_irradiance(*args, **mirror)
+    wrong = halfspace.reflected_irradiance(*args, fresnel="transmit", **mirror)
+    z, zw = (mean - ref) / se, (mean - wrong) / se
+    found = (v[..., 0] > 0).mean(1)
+    print(f"{what}: {chain} / mirror {np.round(mean / ref, 3).tolist()}, max |z| {np.abs(z).max():.2f}; found by "
+          f"the first walk {np.round(found, 3).tolist()}; planted (1 - F at the reflection) min |z| "
+          f"{np.abs(zw).min():.0f}")
+    assert np.all(ref > 0) and np.all(found > 0.02), f"{what}: the scene no longer exercises the chain {chain}"
+    assert np.abs(z).max() <= 4.0, f"{what}: {chain} disagrees with the mirror: z {np.round(z, 2).tolist()}"
+    assert np.abs(zw).min() > 8.0, f"{what}: a reflection weighted by the transmittance would go unnoticed"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("eta", [1.33, 1.5])
 def test_reflection_chain_against_the_mirror_point(mi, eta):
-    from harness.reference import halfspace
-
     scene, setup = _slab(eta)
-    v = _sampled(scene, "RT")[-1]
-    mean, se = v.mean(1), v.std(1, ddof=1) / np.sqrt(v.shape[1])
-    args = (POINTS, setup["light"], setup["intensity"], eta, setup["sigma_t"], 1.0)
-    ref = halfspace.reflected_irradiance(*args)
-    wrong = halfspace.reflected_irradiance(*args, fresnel="transmit")
-    z, zw = (mean - ref) / se, (mean - wrong) / se
-    found = (v[..., 0] > 0).mean(1)
-    print(f"eta {eta}: reflection chain / mirror point {np.round(mean / ref, 3).tolist()}, max |z| "
-          f"{np.abs(z).max():.2f}; found by the first walk {np.round(found, 3).tolist()}; planted (1 - F at the "
-          f"reflection) min |z| {np.abs(zw).min():.0f}")
-    assert np.all(ref > 0) and np.all(found > 0.02), "the slab no longer exercises the reflection chain"
-    assert np.abs(z).max() <= 4.0, f"reflection chain disagrees with the mirror point: z {np.round(z, 2).tolist()}"
-    assert np.abs(zw).min() > 8.0, "a reflection weighted by the transmittance would go unnoticed"
+    _against_mirror(scene, setup, eta, "RT", f"slab, eta {eta}")
 
 
 def _ceiling(eta):
@@ -92,23 +98,11 @@ CEILING = (2.0, 1.0, -50.0, 50.0)
 def test_outside_reflection_chain_against_the_mirrored_light(mi, eta, share, monkeypatch):
     """``("T", "r")``: the light reflects off the ceiling outside, then enters the slab; the ceiling mirrors the
     light. ``share = 1`` takes every seed from the light's side (:func:`harness.reference.mnee_sms.seed_from_light`)."""
-    from harness.reference import halfspace, mnee_sms
+    from harness.reference import mnee_sms
 
     monkeypatch.setattr(mnee_sms, "LIGHT_SIDE_SHARE", share)
     scene, setup = _ceiling(eta)
-    v = _sampled(scene, "Tr")[-1]
-    mean, se = v.mean(1), v.std(1, ddof=1) / np.sqrt(v.shape[1])
-    args = (POINTS, setup["light"], setup["intensity"], eta, setup["sigma_t"], 1.0)
-    ref = halfspace.reflected_irradiance(*args, ceiling=CEILING[0])
-    wrong = halfspace.reflected_irradiance(*args, fresnel="transmit", ceiling=CEILING[0])
-    z, zw = (mean - ref) / se, (mean - wrong) / se
-    found = (v[..., 0] > 0).mean(1)
-    print(f"eta {eta}, light-side share {share}: outside reflection chain / mirrored light "
-          f"{np.round(mean / ref, 3).tolist()}, max |z| {np.abs(z).max():.2f}; found by the first walk "
-          f"{np.round(found, 3).tolist()}; planted (1 - F at the reflection) min |z| {np.abs(zw).min():.0f}")
-    assert np.all(ref > 0) and np.all(found > 0.02), "the ceiling no longer exercises the outside reflection chain"
-    assert np.abs(z).max() <= 4.0, f"outside reflection chain against the mirrored light: z {np.round(z, 2).tolist()}"
-    assert np.abs(zw).min() > 8.0, "a reflection weighted by the transmittance would go unnoticed"
+    _against_mirror(scene, setup, eta, "Tr", f"ceiling, eta {eta}, light-side share {share}", ceiling=CEILING[0])
 
 
 @pytest.mark.slow
