@@ -23,9 +23,8 @@ occluded solution while another solution exists, chains the straight seed does n
 or beyond ``max_crossings``, specular chains with a reflection vertex) as a shortfall, and an
 error in the connection's value (geometry term, Fresnel, transmittance) as a difference of
 either sign. Limits: point lights only; it weighs the medium by first scattering, not by
-what the camera sees; the standard error is that of ``points`` uniform points, and the spread of
-the estimate over seeds is up to about 1.7 times it (the light is concentrated near the lit surface,
-and a curved boundary focuses it: :mod:`harness.reference.losses`).
+what the camera sees; the standard error is that of ``points`` points uniform inside the mesh
+(held against the spread over seeds by ``tests/test_connection_power.py``).
 """
 
 import numpy as np

@@ -26,9 +26,9 @@ reference's size) and returns, per colour channel:
   way, which only the sampled chains of ``[boundary] sms_trials`` make), against the same power
   as the connections deliver it (:func:`harness.reference.connection_power.delivered`,
   :data:`DELIVERED_POINTS` points):
-  ``missed_share = 1 - delivered / traced`` and its standard error (both routes' noise). It counts every loss of the
-  connections at once: reflection vertices, single walks that end on another (occluded)
-  solution than the one that carries the light, chains the straight seed does not lead to.
+  ``missed_share = 1 - delivered / traced`` and its standard error (both routes' noise). It counts
+  every loss of the connections at once: reflection vertices, single walks that end on another
+  (occluded) solution than the one that carries the light, chains the straight seed does not lead to.
 
 :func:`verdict`: the reference is exact when every channel's loss (the larger of ``lost_image_share``
 and ``first_scatter.missed_share``) is at most
