@@ -166,7 +166,8 @@ def part_time(mi, args):
     (pilot and top-ups: measured, not extrapolated; hours at 128 x 128 on a 2-core machine).
     With ``--time-spp S`` each is rendered once at K = 8 x S spp after a warm-up that compiles
     its kernels, and the time to the target is predicted from the measured time and noise by
-    SE ~ 1/sqrt(N): ``T = t (r / target)^2`` (the same K, so the low bias of a median of SEs
+    SE ~ 1/sqrt(N). The CPU column is the render jobs' own CPU time, which leaves out the
+    exactness verdict (``harness.reference.losses``) measured after a smooth scene's render: ``T = t (r / target)^2`` (the same K, so the low bias of a median of SEs
     cancels in the ratio; ``render_reference``'s own pilot predicts the same way).
     """
     from harness.reference.render import render_reference
@@ -187,9 +188,10 @@ def part_time(mi, args):
                     seconds = meta["render_seconds"]
                 else:
                     warm = render_reference(sc, f"{tmp}/warm", spp=1, K=2, variant=args.variant)
-                    cpu = time.process_time()   # all threads of this process: robust to other jobs' load
                     meta = render_reference(sc, f"{tmp}/ref", spp=args.time_spp, K=8, variant=args.variant)
-                    cpu = time.process_time() - cpu
+                    # the render jobs' own CPU time (all their threads: robust to other jobs' load), without the
+                    # exactness verdict that render_reference measures after them on a smooth scene
+                    cpu = meta["render_cpu_seconds"]
                     r = meta["median_rel_se_subsurface"]
                     scale = (r / target) ** 2
                     seconds = meta["render_seconds"] * scale

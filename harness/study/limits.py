@@ -124,7 +124,8 @@ def _mapping(subject, calibrations, budget):
             continue
         ins, held = (res.get("in_sample") or {}).get(scene), (res.get("held_out") or {}).get(scene)
         if ins and held:
-            fits.append({"family": cal["family"], "budget": f"N={res['N']} K={res['steps']}", "file": cal["file"],
+            fits.append({"family": cal["family"], "label": cal.get("label", f"calibrated {cal['family']}"),
+                         "budget": f"N={res['N']} K={res['steps']}", "file": cal["file"],
                          "in_sample": ins["relmse"], "held_out": held["relmse"],
                          "in_sample_energy": ins.get("energy_ratio"), "held_out_energy": held.get("energy_ratio")})
     if not fits:

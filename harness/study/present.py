@@ -91,7 +91,7 @@ def limit_lines(lim):
     m = lim["mapping"]
     if m["measured"]:
         for f in m["fits"]:
-            out.append(f"Mapping (calibrated {f['family']}, {f['budget']}, from its calibration.json): relMSE "
+            out.append(f"Mapping ({f.get('label', 'calibrated ' + f['family'])}, {f['budget']}, from its calibration.json): relMSE "
                        f"in-sample {g(f['in_sample'])}, held out {g(f['held_out'])} (E {g(f['in_sample_energy'])} / "
                        f"{g(f['held_out_energy'])}).")
     else:

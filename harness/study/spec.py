@@ -114,6 +114,7 @@ def _calibration_products(files, budget, path):
         check_products(lists, path, where, keys="field")
         out.append(lists)
         info.append({"file": name, "path": str(p), "sha256": cal.sha256, "family": cal.family,
+                     "label": study_label(f"calibrated:{name}"),
                      "report": str(p.with_name("calibration.json")) if p.with_name("calibration.json").is_file()
                      else None})
     return out, info

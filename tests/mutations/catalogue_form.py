@@ -7,6 +7,7 @@ from .runner import Mutation
 
 FT = "tests/test_calibrated_form.py"
 XT = "tests/test_study_extensions.py"
+BT = "tests/test_calibrate_best.py"
 
 FORM = (
     Mutation("form_loso_leak", "mapping", "harness/calibration/form.py",
@@ -65,4 +66,18 @@ FORM = (
              "paper_rows = [r for r in rows if not is_extension(r)]", "paper_rows = rows",
              ("tests/test_study.py::test_headline_table_and_limits",),
              "the headline table takes the extension families as columns beside the published method"),
+    Mutation("calibrate_best_arithmetic_mean", "mapping", "harness/calibration/select.py",
+             'c["score"] = math.exp(sum(logs) / len(logs))',
+             'c["score"] = sum(c["budgets"][b]["median_held_out_relmse"] for b in common) / len(common)',
+             (f"{BT}::test_the_lowest_geometric_mean_wins",),
+             "the best calibration ranked by the arithmetic mean of its held-out medians, not Eq. S1's geometric one"),
+    Mutation("calibrate_best_all_budgets", "mapping", "harness/calibration/select.py",
+             'logs = [math.log(c["budgets"][b]["median_held_out_relmse"]) for b in common]',
+             'logs = [math.log(v["median_held_out_relmse"]) for v in c["budgets"].values()]',
+             (f"{BT}::test_only_the_common_budgets_count",),
+             "the best calibration scored over its own budgets, so one fitted at fewer (or easier) budgets wins"),
+    Mutation("calibrate_best_copies_the_last", "mapping", "harness/calibration/select.py",
+             "win = sel[\"candidates\"][0]", "win = sel[\"candidates\"][-1]",
+             (f"{BT}::test_the_command_writes_the_winner_and_reads_it_back",),
+             "calibrate-best names the winner but writes the worst candidate's file"),
 )
