@@ -38,7 +38,6 @@ import numpy as np
 
 from harness.reference import halfspace
 from harness.reference import mitsuba_scene as ms
-from harness.reference.mnee import PROBE_AOVS, STATS_AOVS
 from harness.scene import Boundary, list_scenes, load_scene
 
 SMOOTH_SCENES = [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
@@ -151,6 +150,8 @@ def part_failures(mi, args):
         img, _ = stack(mi, d, [0], 64)
         img = img[0]
         tot = img.sum((0, 1))
+        from harness.reference.mnee import PROBE_AOVS, STATS_AOVS   # after use_variant: its integrator needs one
+
         at = {n: 3 + i for i, n in enumerate(STATS_AOVS + PROBE_AOVS)}     # after R, G, B: the AOVs by name
         assert img.shape[-1] == 3 + len(at), f"{img.shape[-1]} channels for {3 + len(at)} (R, G, B and the AOVs)"
         started, conv, conn = (tot[at[n]] for n in ("mnee_started", "mnee_converged", "mnee_connected"))

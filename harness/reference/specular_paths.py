@@ -36,7 +36,12 @@ estimate of the light that the reference loses to specular chains with a reflect
 Limits: point lights only (the scene's lights); the estimate weighs the medium by where light
 first scatters, not by what the camera sees (a share of the light the medium receives, not of
 the image); the object must be the scene's one closed mesh; ``WEIGHT_CUT`` drops
-branches lighter than that fraction (their power is reported as ``cut``).
+branches lighter than that fraction (their power is reported as ``cut``). A branch the split
+labels inside that meets no surface (the shading normal sent it across the geometric surface
+at a grazing hit, so it left the closed mesh) is dropped and reported as ``leaked``: it scatters
+nowhere, as in the renderer, where Mitsuba gives a ray the medium of the geometric normal's side
+(``target_medium``). ``leaked`` is therefore not a shortfall of the traced power; it is largest
+on a faceted scan, where grazing hits are common.
 """
 
 import numpy as np
