@@ -1,6 +1,7 @@
 """Scene loading and validation: the suite loads, and every kind of bad scene
 gives one line naming the file, the field and the fix."""
 
+import dataclasses
 import re
 import subprocess
 import sys
@@ -56,6 +57,19 @@ class TestSuite:
         assert a.with_resolution(64, 64).content_hash != a.content_hash
         changed = a.with_medium(albedo=a.medium.albedo * np.float32(0.5))
         assert changed.content_hash != a.content_hash
+
+    def test_a_replaced_copy_has_its_own_hash(self):
+        """A copy by dataclasses.replace (how benchmarks and tests make an index-matched or eta -> 1 twin) hashes its
+        own contents: the Mitsuba scenes of a reference are cached by the hash, and a stale one rendered the
+        original in the copy's place."""
+        from harness.scene import Boundary
+        from harness.scene.load import scene_hash
+
+        a = load_scene("skin_torus_dielectric")
+        matched = dataclasses.replace(a, boundary=Boundary("index-matched"))
+        assert matched.content_hash == scene_hash(matched) != a.content_hash
+        renamed = dataclasses.replace(a, name="other", description="another text")
+        assert renamed.content_hash == a.content_hash             # what does not change an image keeps the hash
 
     def test_suite_covers_the_issue(self):
         tags = {t for n in list_scenes() for t in load_scene(n).tags}

@@ -89,6 +89,11 @@ class Scene:
     tags: tuple = ()
     content_hash: str = ""
 
+    def __post_init__(self):
+        # The hash is always the contents' own: a copy made with dataclasses.replace (another boundary, another
+        # medium) gets its own hash, so no cache keyed by it (Mitsuba scenes, references) can serve the original's.
+        object.__setattr__(self, "content_hash", scene_hash(self))
+
     def with_resolution(self, width, height):
         """The same scene rendered at another image size (the hash changes with the size)."""
         cam = dataclasses.replace(self.camera, width=int(width), height=int(height))

@@ -598,4 +598,10 @@ MUTATIONS = (
              'if type_name in ("bool", bool, "bool | None"):', 'if type_name in ("bool", bool):',
              ("tests/test_dipole_atlas.py::test_scheme_flags_on_the_command_line",),
              "an optional true/false flag (--adaptive) kept as text, so 'false' reads as true"),
+    Mutation("scene_copy_keeps_stale_hash", "mitsuba", "harness/scene/load.py",
+             'object.__setattr__(self, "content_hash", scene_hash(self))',
+             'object.__setattr__(self, "content_hash", self.content_hash or scene_hash(self))',
+             ("tests/test_scene.py::TestSuite::test_a_replaced_copy_has_its_own_hash",),
+             "a scene copied with another boundary keeps the original's hash: a reference of the copy renders the "
+             "original's cached Mitsuba scene"),
 ) + RIVALS + FORM
