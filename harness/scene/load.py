@@ -97,13 +97,11 @@ class Scene:
     def with_resolution(self, width, height):
         """The same scene rendered at another image size (the hash changes with the size)."""
         cam = dataclasses.replace(self.camera, width=int(width), height=int(height))
-        out = dataclasses.replace(self, camera=cam, content_hash="")
-        return dataclasses.replace(out, content_hash=scene_hash(out))
+        return dataclasses.replace(self, camera=cam)
 
     def with_medium(self, **grids):
         """A copy with some medium grids replaced (used by tests and validation scenes)."""
-        out = dataclasses.replace(self, medium=dataclasses.replace(self.medium, **grids), content_hash="")
-        return dataclasses.replace(out, content_hash=scene_hash(out))
+        return dataclasses.replace(self, medium=dataclasses.replace(self.medium, **grids))
 
 
 def _boundary_key(boundary):
@@ -200,4 +198,4 @@ def scene_from_model(spec, path):
     scene = Scene(name=path.parent.name, path=path.parent, units=spec.units, description=spec.description,
                   mesh=spec.mesh.mesh, camera=camera, lights=lights, boundary=boundary, medium=medium,
                   tolerances=spec.tolerances.model_dump(exclude_none=True), tags=tuple(spec.tags))
-    return dataclasses.replace(scene, content_hash=scene_hash(scene))
+    return scene
