@@ -167,9 +167,10 @@ def part_time(mi, args):
     (pilot and top-ups: measured, not extrapolated; hours at 128 x 128 on a 2-core machine).
     With ``--time-spp S`` each is rendered once at K = 8 x S spp after a warm-up that compiles
     its kernels, and the time to the target is predicted from the measured time and noise by
-    SE ~ 1/sqrt(N). The CPU column is the render jobs' own CPU time, which leaves out the
-    exactness verdict (``harness.reference.losses``) measured after a smooth scene's render: ``T = t (r / target)^2`` (the same K, so the low bias of a median of SEs
-    cancels in the ratio; ``render_reference``'s own pilot predicts the same way).
+    SE ~ 1/sqrt(N): ``T = t (r / target)^2`` (the same K, so the low bias of a median of SEs
+    cancels in the ratio; ``render_reference``'s own pilot predicts the same way). These renders
+    skip the exactness verdict (``judge_exactness=False``), which is no part of a render's cost;
+    the CPU column is the render jobs' own CPU time (all their threads).
     """
     from harness.reference.render import render_reference
 
@@ -188,10 +189,12 @@ def part_time(mi, args):
                                             max_spp_per_seed=65536)
                     seconds = meta["render_seconds"]
                 else:
-                    warm = render_reference(sc, f"{tmp}/warm", spp=1, K=2, variant=args.variant)
-                    meta = render_reference(sc, f"{tmp}/ref", spp=args.time_spp, K=8, variant=args.variant)
-                    # the render jobs' own CPU time (all their threads: robust to other jobs' load), without the
-                    # exactness verdict that render_reference measures after them on a smooth scene
+                    # no exactness verdict after either render: it is not part of the render's cost
+                    warm = render_reference(sc, f"{tmp}/warm", spp=1, K=2, variant=args.variant,
+                                            judge_exactness=False)
+                    meta = render_reference(sc, f"{tmp}/ref", spp=args.time_spp, K=8, variant=args.variant,
+                                            judge_exactness=False)
+                    # the render jobs' own CPU time (all their threads: robust to other jobs' load)
                     cpu = meta["render_cpu_seconds"]
                     r = meta["median_rel_se_subsurface"]
                     scale = (r / target) ** 2

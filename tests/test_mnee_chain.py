@@ -412,6 +412,24 @@ class TestReporting:
         monkeypatch.delenv(losses.ALLOW_ENV)
         losses.check_exact(tmp_path)
 
+    def test_a_reference_rendered_without_the_verdict_is_refused(self, mi, tmp_path, monkeypatch):
+        """``judge_exactness=False`` (timing benchmarks) skips the verdict and records ``"exact": false``, "not
+        judged": an accuracy verdict against that folder is refused like one against an inexact reference."""
+        import json
+
+        from harness.errors import InputError
+        from harness.reference import losses, nonconvex
+        from harness.reference.render import render_reference
+
+        monkeypatch.delenv(losses.ALLOW_ENV, raising=False)
+        scene = nonconvex.torus_hole(1.0001, size=4)
+        meta = render_reference(scene, tmp_path / "ref", spp=1, K=2, judge_exactness=False)
+        assert meta["exact"] is False and meta["exact_note"].startswith("not judged"), meta.get("exact_note")
+        assert "mnee_losses" not in meta
+        assert json.loads((tmp_path / "ref" / "reference.json").read_text())["exact"] is False
+        with pytest.raises(InputError, match="not judged"):
+            losses.check_exact(tmp_path / "ref")
+
     @pytest.mark.slow
     def test_reference_records_losses_and_exactness(self, mi, tmp_path):
         """torus_hole (grey: one pass) at 12 x 12, eta 1.0001: without chains the reference says it is not exact, with

@@ -57,7 +57,7 @@ class ReferencePlan:
 
     def __init__(self, setup, out_dir, spp=None, K=None, target_rel_se=0.05, max_seconds=None,
                  max_spp_per_seed=MAX_SPP_PER_SEED, seed_base=0, progress=True, slots=1, executor="serial",
-                 steps=None):
+                 steps=None, judge_exactness=True):
         K = DEFAULT_K if K is None else int(K)
         if K < 2:
             raise InputError("render_reference", "K", f"must be at least 2 to estimate noise, got {K}", "use K >= 2")
@@ -72,6 +72,7 @@ class ReferencePlan:
         self.max_seconds, self.max_spp_per_seed = max_seconds, int(max_spp_per_seed)
         self.seed_base, self.slots, self.executor = int(seed_base), max(1, int(slots)), executor
         self.steps = None if steps is None else max(1, int(steps))
+        self.judge_exactness = bool(judge_exactness)
         self.passes = setup.passes()
         cam = self.scene.camera
         self.chunk_spp = max(1, MAX_LANES // (cam.width * cam.height))
@@ -438,7 +439,12 @@ class ReferencePlan:
             "files": list(REFERENCE_FILES) + (["absorber.exr"] if absorber else []),
             **ms.scene_notes(self.scene),
         }
-        if ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters:
+        if ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters and not self.judge_exactness:
+            # A caller that only times renders (benchmarks) skips the verdict; the reference then says it
+            # is not known to be exact, so no accuracy verdict is drawn against it.
+            meta.update(exact=False, exact_note=("not judged: the exactness verdict was skipped "
+                                                 "(render_reference(judge_exactness=False))"))
+        elif ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters:
             # What the manifold connections leave out, measured (harness.reference.losses); a reference
             # whose lost light exceeds its share of the noise target says so and is not judged against.
             from harness.reference import losses

@@ -100,7 +100,7 @@ class SerialExecutor:
 
 def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, variant=None, max_seconds=None,
                      max_spp_per_seed=MAX_SPP_PER_SEED, seed_base=0, extra_emitters=None, threads=None,
-                     client=None, progress=False, steps=None):
+                     client=None, progress=False, steps=None, judge_exactness=True):
     """Render the reference folder of ``scene`` into ``out_dir`` (atomically) and return its metadata.
 
     Parameters
@@ -119,6 +119,9 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
     client : a ``dask.distributed.Client``: render the jobs on its workers; None renders here.
     progress : show progress on stderr (:class:`harness.progress.Progress`).
     steps : steps of the final render (None: one per ``STEP_MIN_SPP`` samples per seed, at most ``STEPS``).
+    judge_exactness : measure a smooth-dielectric scene's exactness verdict (:mod:`harness.reference.losses`)
+        after the render. ``False`` (timing benchmarks only) skips it and records ``"exact": false``,
+        "not judged", so that no accuracy verdict is drawn against the folder.
 
     Returns the dict written to ``reference.json``.
     """
@@ -126,12 +129,13 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
     if client is None:
         executor = SerialExecutor()
         plan = ReferencePlan(setup, out_dir, spp=spp, K=K, target_rel_se=target_rel_se, max_seconds=max_seconds,
-                             max_spp_per_seed=max_spp_per_seed, seed_base=seed_base, progress=progress, steps=steps)
+                             max_spp_per_seed=max_spp_per_seed, seed_base=seed_base, progress=progress, steps=steps,
+                             judge_exactness=judge_exactness)
         return executor.run(plan)
     from harness.reference.distributed import DaskDriver
 
     driver = DaskDriver(client, variant=variant)
     plan = ReferencePlan(setup, out_dir, spp=spp, K=K, target_rel_se=target_rel_se, max_seconds=max_seconds,
                          max_spp_per_seed=max_spp_per_seed, seed_base=seed_base, progress=progress,
-                         slots=driver.slots, executor=driver.name, steps=steps)
+                         slots=driver.slots, executor=driver.name, steps=steps, judge_exactness=judge_exactness)
     return driver.run([plan])[0]

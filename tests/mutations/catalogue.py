@@ -604,4 +604,10 @@ MUTATIONS = (
              ("tests/test_scene.py::TestSuite::test_a_replaced_copy_has_its_own_hash",),
              "a scene copied with another boundary keeps the original's hash: a reference of the copy renders the "
              "original's cached Mitsuba scene"),
+    Mutation("unjudged_reference_passes_as_exact", "mitsuba", "harness/reference/plan.py",
+             "meta.update(exact=False, exact_note=(",
+             "meta.update(exact=None, exact_note=(",
+             ("tests/test_mnee_chain.py::TestReporting::test_a_reference_rendered_without_the_verdict_is_refused",),
+             "a smooth reference rendered without the exactness verdict records no verdict: the accuracy tests "
+             "would judge SSLPV against it"),
 ) + RIVALS + FORM
