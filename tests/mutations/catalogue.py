@@ -610,4 +610,21 @@ MUTATIONS = (
              ("tests/test_mnee_chain.py::TestReporting::test_a_reference_rendered_without_the_verdict_is_refused",),
              "a smooth reference rendered without the exactness verdict records no verdict: the accuracy tests "
              "would judge SSLPV against it"),
+    Mutation("path_length_leaves_out_the_exit_flight", "physics", "harness/reference/path_length.py",
+             "out_l.append(ell[leave] + dex[leave])", "out_l.append(ell[leave])",
+             ("tests/test_path_length.py::test_mean_path_is_four_volume_over_surface",),
+             "a photon's last flight, the one that leaves the sphere, is not counted in its path length"),
+    Mutation("path_length_tally_without_the_camera_segment", "physics", "harness/reference/path_length.py",
+             "np.searchsorted(edges, (ell + de)[ok][inside]", "np.searchsorted(edges, ell[ok][inside]",
+             ("tests/test_path_length.py::test_more_absorption_weights_each_path_by_beer_lambert",),
+             "the path length tallied for a camera connection leaves out the segment from the collision to the "
+             "surface"),
+    Mutation("path_length_phase_backwards", "physics", "harness/reference/path_length.py",
+             "hg(np.einsum(\"ij,ij->i\", d, wc), gg)", "hg(-np.einsum(\"ij,ij->i\", d, wc), gg)",
+             ("tests/test_path_length.py::test_image_energy_matches_the_mitsuba_reference",),
+             "the camera connection evaluates the phase function at the reversed angle"),
+    Mutation("path_length_film_cosine_squared", "camera", "harness/reference/path_length.py",
+             "(dist * dist * a_pix * cos ** 3)", "(dist * dist * a_pix * cos ** 2)",
+             ("tests/test_path_length.py::test_image_energy_matches_the_mitsuba_reference",),
+             "the film's solid-angle-to-area factor cos^3 taken as cos^2"),
 ) + RIVALS + FORM
