@@ -10,10 +10,12 @@ sphere scene of the suite (``harness.reference.path_length``: a homogeneous, ind
   summed) carried by paths of at most ``K`` cells inside the medium, with its standard error, from the
   path-length tracer (which reproduces the committed Mitsuba references' energy,
   ``tests/test_path_length.py``);
-* **SSLPV K / truth**: SSLPV's subsurface energy against the committed reference, the paper's
-  ``collision`` mapping at grid ``N``, with the paper's ``outside = vacuum`` and with ``absorb`` (no
-  light crosses empty cells, so no light reaches the shading around the object, which has no
-  counterpart in the truth);
+* **SSLPV K / truth**: SSLPV's subsurface energy against the committed reference at grid ``N``: the
+  paper's ``collision`` mapping with the paper's ``outside = vacuum`` and with ``absorb`` (no light
+  crosses empty cells, so no light reaches the shading around the object, which has no counterpart
+  in the truth), and the ``transport`` mapping (an extension: one step is one cell of path,
+  ``docs/diffusion_mapping.md`` Sec. 11) with ``absorb``, and the share of its masked pixels with a
+  negative channel;
 * **outer ring**: the share of an image's masked energy in its outer ring (pixels beyond 7/8 of the
   largest distance of a masked pixel from the sphere's projected centre), the reference's beside
   SSLPV's: where the lattice's light has not travelled far, it lies next to the silhouette;
@@ -104,16 +106,17 @@ def ring_share(image, mask, ring):
     return float(img[ring].sum() / img[mask].sum())
 
 
-def sslpv_energy(renderer, scene, ref, mask, ring, grid, outside):
-    """``{K or 'steady': (energy ratio, outer-ring share)}`` of the paper's collision mapping."""
+def sslpv_energy(renderer, scene, ref, mask, ring, grid, outside, mapping="collision"):
+    """``{K or 'steady': (energy ratio, outer-ring share)}`` of ``mapping`` with ``outside``."""
     from harness.metrics import compute
     from sslpv_gl.params import SSLPVParams
 
     def figures(r):
         img = np.asarray(r.subsurface, float)
-        return float(compute("energy_ratio", img, ref, mask).value), ring_share(img, mask, ring)
+        return (float(compute("energy_ratio", img, ref, mask).value), ring_share(img, mask, ring),
+                float((img[mask] < 0).any(axis=-1).mean()))
 
-    p = SSLPVParams(N=grid, steps=max(STEPS), mapping="collision", outside=outside)
+    p = SSLPVParams(N=grid, steps=max(STEPS), mapping=mapping, outside=outside)
     out = {k: figures(r) for k, r in zip(STEPS, renderer.render_steps(scene, p, list(STEPS)))}
     out["steady"] = figures(renderer.render(scene, p.replace(steps="steady")))
     return out
@@ -158,6 +161,7 @@ def main(argv=None):
         ring = outer_ring(sphere, mask)
         vac = sslpv_energy(renderer, scene, ref, mask, ring, args.grid, "vacuum")
         ab = sslpv_energy(renderer, scene, ref, mask, ring, args.grid, "absorb")
+        tr = sslpv_energy(renderer, scene, ref, mask, ring, args.grid, "absorb", mapping="transport")
         across = 2.0 * sphere.radius / dx
         page.heading(name)
         page.para(f"Sphere {across:.1f} cells across; reduced mean free path "
@@ -166,16 +170,19 @@ def main(argv=None):
                   f"D / D_lpv = {' / '.join(f'{a / b:.1f}' for a, b in zip(d_med, d_lat))}.")
         truth_ring = ring_share(ref, mask, ring)
         rows = [[str(k), f"{shares[k][0]:.3f} ± {shares[k][1]:.3f}", f"{vac[k][0]:.3g}", f"{ab[k][0]:.3g}",
-                 f"{ab[k][1]:.2f}"] for k in STEPS]
-        rows.append(["steady", "1", f"{vac['steady'][0]:.3g}", f"{ab['steady'][0]:.3g}", f"{ab['steady'][1]:.2f}"])
-        page.table(["K", "truth <= K", "SSLPV vacuum", "SSLPV absorb", "absorb: outer ring"], rows,
+                 f"{ab[k][1]:.2f}", f"{tr[k][0]:.3g}", f"{tr[k][1]:.2f}", f"{tr[k][2]:.3f}"] for k in STEPS]
+        rows.append(["steady", "1", f"{vac['steady'][0]:.3g}", f"{ab['steady'][0]:.3g}", f"{ab['steady'][1]:.2f}",
+                     f"{tr['steady'][0]:.3g}", f"{tr['steady'][1]:.2f}", f"{tr['steady'][2]:.3f}"])
+        page.table(["K", "truth <= K", "collision vacuum", "collision absorb", "its outer ring", "transport absorb",
+                    "its outer ring", "its pixels < 0"], rows,
                    note=f"The reference's outer ring holds {truth_ring:.2f} of its energy.")
         summary.append([name, f"{across:.0f}", f"{float(np.mean(d_med / d_lat)):.1f}",
-                        f"{shares[32][0]:.3f}", f"{vac[32][0]:.3g}", f"{ab[32][0]:.3g}", f"{ab['steady'][0]:.3g}",
-                        f"{truth_ring:.2f} / {ab[32][1]:.2f}"])
+                        f"{shares[32][0]:.3f}", f"{vac[32][0]:.3g}", f"{ab[32][0]:.3g}", f"{tr[32][0]:.3g}",
+                        f"{ab['steady'][0]:.3g}", f"{tr['steady'][0]:.3g}", f"{truth_ring:.2f} / {ab[32][1]:.2f}"])
     page.heading("Summary at K = 32")
-    page.table(["scene", "cells across", "D / D_lpv (mean)", "truth <= 32", "vacuum K = 32", "absorb K = 32",
-                "absorb steady", "outer ring: truth / absorb K = 32"], summary)
+    page.table(["scene", "cells across", "D / D_lpv (mean)", "truth <= 32", "collision vacuum K = 32",
+                "collision absorb K = 32", "transport absorb K = 32", "collision absorb steady",
+                "transport absorb steady", "outer ring: truth / collision absorb K = 32"], summary)
     page.finish(args.write)
 
 

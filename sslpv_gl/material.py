@@ -30,7 +30,7 @@ Parameters of :func:`lpv_material`
      - LPV resolution per axis
    * - ``mapping``
      - ``"collision"``
-     - ``"literal"``, ``"collision"`` or ``"diffusion"`` (:data:`MAPPINGS`)
+     - ``"literal"``, ``"collision"``, ``"diffusion"`` or ``"transport"`` (:data:`MAPPINGS`)
    * - ``resample``
      - ``"box"``
      - ``"box"`` (exact overlap average) or ``"point"`` (trilinear at the
@@ -80,6 +80,24 @@ Mappings
     the most isotropic lattice; the medium's ``g`` enters only through
     ``sigma_t'``). It is the only mapping with a ``radiance_scale`` other
     than 1 (Eq. (21)).
+``transport`` (an extension: not the paper's)
+    One propagation step is one cell of the light's path, in time as well as in space
+    (``docs/diffusion_mapping.md`` Sec. 11). The lattice moves every light by one cell per step,
+    but its band-1 part keeps only ``b k1`` (``b = 0.4026``) of a beam's direction per hop, so at
+    the paper's ``k1 <= 1`` it diffuses at most ``D_lpv(1) = 0.2258`` cells^2 per step (Eq. (9)),
+    while light in a medium whose reduced mean free path is ``l_tr`` cells diffuses
+    ``D = l_tr / 3`` cells^2 per cell of path. ``transport`` sets ``sigma_lpv = sigma_a`` (a step
+    survives ``exp(-sigma_a dx)``, what a cell of path does), ``sigma_s' = 1`` and the LATTICE
+    ``g = k1`` with
+
+        D_lpv(k1) = 1 / (3 sigma_t (1 - albedo g) dx)                                   (T1)
+
+    (Eq. (10) inverts (9)), clipped to ``[-1, TRANSPORT_K1_MAX]``: ``k1 > 1`` gives back the
+    direction that the lattice's own hop forgets. Diffusion then takes as many steps as cells of
+    path, and the steady state's diffusion length is the medium's. It needs cells outside the
+    mesh that take light out of the propagation (:data:`TRANSPORT_OUTSIDE`): with ``vacuum``,
+    ``material`` or ``extrapolated`` the amplified band 1 carries light round the object and
+    rings into negative radiance.
 
 Forward-peaked media: delta-Eddington scaling
 ---------------------------------------------
@@ -112,7 +130,9 @@ Limits
 * ``diffusion``: exact for a homogeneous medium far from boundaries; in a
   heterogeneous medium it is applied cell by cell, which is exact where
   ``sigma_t'`` is constant (``sigma_a`` may vary) but not across jumps of
-  ``D`` (docs Sec. 6). Vacuum cells (``sigma_t = 0``) get a zero
+  ``D`` (docs Sec. 6). ``transport``: ``l_tr`` above ``3 D_lpv(TRANSPORT_K1_MAX) = 19.7`` cells
+  (``sigma_t' dx`` below 0.051) or below ``3 D_lpv(-1) = 0.42`` cells is clipped, so such a
+  medium diffuses slower, or faster, per step than per cell of path. Vacuum cells (``sigma_t = 0``) get a zero
   ``radiance_scale``. Under ``outside = absorb``, ``extrapolated`` and ``interior``
   the cells without the medium (sinks, empty cells) get ``radiance_scale = 1``: they
   hold flux that left the medium, not the lattice's fluence
@@ -125,7 +145,7 @@ import numpy as np
 
 from harness.errors import InputError
 
-from . import boundary, diffusion
+from . import boundary, diffusion, lattice
 from .material_form import cell_numbers, extent_cells
 
 __all__ = [
@@ -139,6 +159,10 @@ __all__ = [
     "lpv_material",
     "PHASE_SCALINGS",
     "delta_eddington",
+    "transport_k1",
+    "TRANSPORT_K1_MAX",
+    "TRANSPORT_OUTSIDE",
+    "check_transport_outside",
 ]
 
 
@@ -241,7 +265,39 @@ def _diffusion(sigma_t, albedo, dx, g=0.0):
     return m["sigma_lpv"], m["sigma_s_prime"]
 
 
-MAPPINGS = {"literal": _literal, "collision": _collision, "diffusion": _diffusion}
+#: Band-1 factor bounds of ``transport``: a step's band-1 eigenvalue ``b k1`` stays below
+#: ``a = 1`` (docs Eq. (4); 0.986 at 2.45, where ``D_lpv`` = 6.55 cells^2 per step) and ``k1 >= -1``.
+TRANSPORT_K1_MAX = 2.45
+TRANSPORT_K1_MIN = -1.0
+#: ``outside`` modes ``transport`` supports: empty cells take light out of the propagation.
+TRANSPORT_OUTSIDE = ("absorb", "interior")
+
+
+def check_transport_outside(mapping, outside):
+    """One line when ``transport`` is combined with an ``outside`` mode it does not support."""
+    if mapping == "transport" and outside not in TRANSPORT_OUTSIDE:
+        raise InputError("--outside", "outside", f"mapping transport needs cells outside the mesh that take light out "
+                         f"of the propagation, got {outside!r}", "use --outside " + " or ".join(TRANSPORT_OUTSIDE))
+
+
+def transport_k1(sigma_t, albedo, g, dx):
+    """The lattice ``g = k1`` of ``transport`` (Eq. (T1)): ``D_lpv(k1) = l_tr / 3``, ``l_tr`` in cells, clipped."""
+    st = np.asarray(sigma_t, dtype=np.float64)
+    reduced = st * (1.0 - np.asarray(albedo, dtype=np.float64) * np.asarray(g, dtype=np.float64))
+    d_min, d_max = float(lattice.d_lpv(TRANSPORT_K1_MIN)), float(lattice.d_lpv(TRANSPORT_K1_MAX))
+    with np.errstate(divide="ignore"):
+        D = np.where(reduced > 0.0, 1.0 / (3.0 * np.maximum(reduced, 1e-300) * float(dx)), d_max)
+    # Eq. (10) is monotonic between the bounds only (it has a pole below D_lpv(-1)): clip D first
+    k1 = lattice.k1_for_d_lpv(np.clip(D, d_min, d_max))
+    return np.clip(k1, TRANSPORT_K1_MIN, TRANSPORT_K1_MAX)
+
+
+def _transport(sigma_t, albedo, dx, g=0.0):
+    sigma_a = np.asarray(sigma_t, dtype=np.float64) * (1.0 - np.asarray(albedo, dtype=np.float64))
+    return sigma_a, np.ones_like(sigma_a)
+
+
+MAPPINGS = {"literal": _literal, "collision": _collision, "diffusion": _diffusion, "transport": _transport}
 
 
 def map_material(sigma_t, albedo, dx, mapping="collision", g=None):
@@ -250,7 +306,7 @@ def map_material(sigma_t, albedo, dx, mapping="collision", g=None):
     See the module docstring for the mappings. ``dx`` is the LPV cell
     width in scene units. ``g`` (the medium's, default 0) is used only by
     ``diffusion``, whose Eq. 3 factor also needs the lattice ``g`` of
-    :func:`map_material_full`. Unknown ``mapping`` raises ``InputError``.
+    :func:`map_material_full` (as does ``transport``'s). Unknown ``mapping`` raises ``InputError``.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
     if mapping == "diffusion":
@@ -272,6 +328,8 @@ def map_material_full(sigma_t, albedo, g, dx, mapping="collision"):
         m = diffusion.diffusion_mapping(sigma_t, albedo, g, float(dx))
         return {k: m[k] for k in ("sigma_lpv", "sigma_s_prime", "g", "radiance_scale")}
     sigma_lpv, sp = MAPPINGS[mapping](sigma_t, albedo, float(dx))
+    if mapping == "transport":                       # the lattice g is k1 (Eq. (T1)), with sigma_s' = 1
+        g = transport_k1(sigma_t, albedo, g, float(dx))
     shape = np.broadcast(np.asarray(sigma_lpv), np.asarray(sp), np.asarray(g)).shape
     return {
         "sigma_lpv": np.broadcast_to(sigma_lpv, shape).astype(np.float64),
@@ -324,6 +382,8 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     scalar one). Other parameters: the module docstring.
     """
     _check_choice(mapping, MAPPINGS, "mapping")
+    if inside_mask is not None:
+        check_transport_outside(mapping, outside)
     if phase_scaling not in PHASE_SCALINGS:
         raise InputError("phase_scaling", "phase_scaling", f"unknown phase_scaling {phase_scaling!r}",
                          "use one of: " + ", ".join(PHASE_SCALINGS))

@@ -16,7 +16,7 @@ from harness.errors import InputError
 
 from .boundary import OUTSIDE_MODES
 from .calibrated import load_calibrated, parse_mapping
-from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS
+from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS, check_transport_outside
 from .reflect import BOUNDARY_REFLECTS, check
 
 __all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES"]
@@ -53,7 +53,9 @@ class SSLPVParams:
                               "less than converge_tol of the injected flux; 'steady': the converged sum, solved "
                               "directly (sslpv_gl.steady)")
     mapping: str = _p("collision", "physical (sigma_t, albedo) -> LPV (sigma_lpv, sigma_s') mapping: literal, "
-                                   "collision, diffusion, or calibrated:PATH (a file of sslpv-harness calibrate)")
+                                   "collision, diffusion, transport (an extension: one step is one cell of path; "
+                                   "outside absorb or interior), or calibrated:PATH (a file of sslpv-harness "
+                                   "calibrate)")
     resample: str = _p("box", "medium grid -> LPV grid resampling: box average or point (trilinear)")
     outside: str = _p("vacuum", "LPV cells outside the mesh: vacuum (the paper), material, absorb, extrapolated "
                                   "or interior (no light moves between two outside cells; sslpv_gl.boundary)")
@@ -103,6 +105,7 @@ class SSLPVParams:
             choice("mapping", tuple(MAPPINGS) + ("calibrated:PATH",))
         choice("resample", tuple(RESAMPLERS))
         choice("outside", OUTSIDE)
+        check_transport_outside(self.mapping, self.outside)
         choice("phase_scaling", PHASE_SCALINGS)
         choice("boundary_reflect", BOUNDARY_REFLECTS)
         check(self.boundary_reflect, self.outside)

@@ -14,7 +14,7 @@ import pytest
 
 from harness.scene import Boundary, load_scene
 from sslpv_gl import twin
-from sslpv_gl.material import MAPPINGS, map_material
+from sslpv_gl.material import MAPPINGS, map_material, map_material_full
 from sslpv_gl.params import SSLPVParams
 
 pytestmark = pytest.mark.gl
@@ -42,6 +42,8 @@ def _random_material(rng, N, dx, mapping):
     albedo = rng.uniform(0.0, 1.0, (N, N, N, 3))
     sigma_lpv, sp = map_material(sigma_t, albedo, dx, mapping)
     g = rng.uniform(-0.9, 0.9, (N, N, N, 3))
+    if mapping == "transport":              # its lattice g is the band-1 factor k1, in [-1, 2.45]
+        g = map_material_full(sigma_t * rng.uniform(0.0, 1.0, sigma_t.shape) ** 4, albedo, g, dx, mapping)["g"]
     return {"sigma_lpv": sigma_lpv.astype(np.float32), "sigma_s_prime": np.clip(sp, 0, 1).astype(np.float32),
             "g": g.astype(np.float32)}
 

@@ -19,7 +19,7 @@ def make_medium(sigma_t, albedo, g, extent=2.0):
 
 class TestMappings:
     def test_registry(self):
-        assert set(MAPPINGS) == {"literal", "collision", "diffusion"}
+        assert set(MAPPINGS) == {"literal", "collision", "diffusion", "transport"}
 
     def test_literal_is_identity(self):
         st, a = np.array([0.0, 1.5, 40.0]), np.array([0.9, 0.2, 1.0])

@@ -131,6 +131,21 @@ class TestSteadyState:
         print(f"\nN=12 homogeneous absorbing: steady vs twin (500 steps) max err = {err:.2e} of max c00")
         assert err < 1e-4
 
+    def test_transport_band1_factor_above_one_matches_iterated_twin(self):
+        """The ``transport`` mapping's lattice g = k1 > 1 (sigma_s' = 1): band 1 amplified, the series still
+        converges (b k1 < 1, docs Eq. (4)) and the direct solve equals the iterated twin."""
+        N = 12
+        c0 = np.zeros((N, N, N, 3, 4))
+        c0[6, 6, 1] = clamped_cosine_coeffs([1.0, 0.0, 0.0])
+        dx = 0.1
+        sig = np.array([0.5, 1.0, 2.0])                # loss 0.05..0.2 per step
+        accum, info = steady.steady_state(c0, np.broadcast_to(sig, (N, N, N, 3)), 1.0, 2.3, dx)
+        prop, twin_accum = propagate(c0, sig, 1.0, 2.3, dx, steps=500, skip=2)
+        assert steady.remaining_fraction(prop, c0) < 1e-6
+        err = max_err_vs_c00(accum, twin_accum)
+        print(f"\nN=12 homogeneous, k1 = 2.3: steady vs twin (500 steps) max err = {err:.2e} of max c00")
+        assert err < 1e-4
+
     def test_skip_handled_exactly(self):
         rng = np.random.default_rng(2)
         N = 8

@@ -94,3 +94,19 @@ def test_the_outside_treatment_for_the_extensions():
     assert default_outside({"families": []}) is None
     worse = {"families": [{"family": "collision + interior", "cells": {"a": {"ratio": 1.3}, "b": {"ratio": 1.1}}}]}
     assert default_outside(worse)["outside"] == "vacuum"          # nothing beats the paper's treatment
+
+
+def test_the_transport_mapping_is_judged_against_the_paper_collision():
+    fam = family_of("sslpv", {"mapping": "transport", "outside": "absorb"})
+    assert fam == "transport + absorb" and is_extension({"method": "sslpv", "family": fam})
+    assert base_family(fam) == "collision"
+    # its rows say nothing about the outside treatment alone, so they do not choose the extensions' one
+    found = {"families": [{"family": "transport + absorb", "cells": {"a": {"ratio": 0.1}}},
+                          {"family": "collision + interior", "cells": {"a": {"ratio": 0.9}}}]}
+    assert default_outside(found)["outside"] == "interior"
+
+
+def test_a_calibrated_mapping_names_its_settings_by_its_label():
+    cal = "calibrated:baselines/calibrated/collision/calibrated.toml"
+    assert family_of("sslpv", {"mapping": cal, "outside": "vacuum", "skip": 2}) == "calibrated collision"
+    assert family_of("sslpv", {"mapping": cal, "outside": "absorb"}) == "calibrated collision"

@@ -5,7 +5,9 @@ An *extension* is an SSLPV option that the paper does not have (:data:`PAPER`: t
 the outside treatments ``interior``, ``absorb``, ``extrapolated`` and ``material`` (``outside``;
 ``docs/diffusion_mapping.md`` Sec. 8), the dielectric boundary's internal reflection (``boundary_reflect =
 rdr``, Sec. 10), delta-Eddington scaling of forward-peaked media (``phase_scaling``, Sec. 9), the
-``eta^2`` radiance compression (``eta2``) and an inward injection offset (``inject_offset``). A
+``eta^2`` radiance compression (``eta2``), an inward injection offset (``inject_offset``) and the
+``transport`` mapping (Sec. 11: one step is one cell of path), which is judged against the paper's
+``collision`` (:data:`MAPPING_BASE`) and needs an outside treatment that takes light out. A
 configuration with any of them competes in its own family, named after its mapping's family and its
 extensions (``collision + interior``, ``diffusion + R_dr``; :func:`family_suffix`), never in the
 paper's, so the headline table keeps the published method and each calibration as they are.
@@ -19,7 +21,8 @@ the ratio of the ranking metric (extension / base), and the scenes where the ext
 worse beyond the reference's noise.
 
 :func:`default_outside`: the outside treatment for the extensions, chosen by the measured effect on the
-suite: among the families whose only extension is an outside treatment, the treatment whose median
+suite: among the families whose only extension is an outside treatment (an extension mapping's families
+left out), the treatment whose median
 ratio, pooled over their mappings' scenes, is lowest, provided it is below 1 (the paper's ``vacuum``
 is the ratio 1 by definition, and stays the choice when no treatment beats it); ``None`` when the
 study rendered none. The
@@ -42,6 +45,8 @@ PAPER = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none
 NAMES = {"boundary_reflect": {"rdr": "R_dr"}, "phase_scaling": {"delta-eddington": "δ-Eddington"},
          "eta2": {True: "η²"}}
 SEPARATOR = " + "
+#: Mappings that are themselves extensions, and the published mapping each is judged against.
+MAPPING_BASE = {"transport": "collision"}
 
 
 def extension_tags(params):
@@ -70,8 +75,11 @@ def is_extension(row):
 
 
 def base_family(family):
-    """The family of the same mapping without extensions: ``collision + interior`` -> ``collision``."""
-    return family.split(SEPARATOR, 1)[0]
+    """The family of the same mapping without extensions: ``collision + interior`` -> ``collision``; an extension
+    mapping's family against the published mapping it extends (:data:`MAPPING_BASE`): ``transport + absorb`` ->
+    ``collision``."""
+    head = family.split(SEPARATOR, 1)[0]
+    return MAPPING_BASE.get(head, head)
 
 
 def _best(rows, budget, metric):
@@ -142,9 +150,9 @@ def default_outside(found):
 
     pooled = {}
     for f in found["families"]:
-        tags = f["family"].split(SEPARATOR)[1:]
-        if len(tags) != 1 or tags[0] not in OUTSIDE_MODES:
-            continue
+        head, *tags = f["family"].split(SEPARATOR)
+        if len(tags) != 1 or tags[0] not in OUTSIDE_MODES or head in MAPPING_BASE:
+            continue                                  # an extension mapping's ratio is not the outside's alone
         pooled.setdefault(tags[0], []).extend(c["ratio"] for c in f["cells"].values() if c["ratio"] is not None)
     by_mode = {m: statistics.median(v) for m, v in pooled.items() if v}
     if not by_mode:

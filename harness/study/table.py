@@ -36,7 +36,9 @@ def family_of(method, params):
     ``terms = single``). An SSLPV configuration with options the paper does not have competes in its own
     family, named after them (``collision + interior``; :mod:`harness.study.extensions`)."""
     if method == "sslpv":
-        return study_label(params.get("mapping")) + family_suffix(params)
+        label = study_label(params.get("mapping"))
+        # a calibrated file's settings (its outside treatment, say) belong to the calibration, named by its label
+        return label if label.startswith("calibrated") else label + family_suffix(params)
     terms = params.get("terms", "diffusion")
     suffix = {"both": " + S1", "single": " S1 only"}.get(terms, "")
     return f"{method} {params.get('gather', '')}".strip() + suffix
