@@ -110,3 +110,27 @@ def test_a_calibrated_mapping_names_its_settings_by_its_label():
     cal = "calibrated:baselines/calibrated/collision/calibrated.toml"
     assert family_of("sslpv", {"mapping": cal, "outside": "vacuum", "skip": 2}) == "calibrated collision"
     assert family_of("sslpv", {"mapping": cal, "outside": "absorb"}) == "calibrated collision"
+
+
+def test_the_lattice_speed_limit_of_a_scene():
+    """The study's speed decomposition on the homogeneous back-lit sphere: the median over its cells equals the
+    value from the scene file's constants, and each transport family's best row within the budget is shown."""
+    from harness.study.limits import _speed
+    from harness.study.present import limit_lines
+    from sslpv_gl.lattice import d_lpv
+    from sslpv_gl.material import map_material_full
+
+    rows = [{"scene": "backlit_sphere", "family": "transport + absorb", "N": 32, "K": k, "setting": f"t{k}",
+             "subsurface_relmse": v, "subsurface_energy_ratio": 1.0} for k, v in (("32", 0.2), ("steady", 0.03))]
+    rows.append(dict(rows[0], K="128", setting="t128", subsurface_relmse=0.01))     # outside the budget
+    sp = _speed(rows, "backlit_sphere", "relmse", {"grid": 32, "steps": [8, 16, 32, 64, "steady"]})
+    st, al, g, dx = np.array([5.5, 6.0, 6.5]), np.array([0.995, 0.99, 0.98]), 0.3, 1.26 / 32
+    m = map_material_full(st, al, g, dx, "collision")
+    want = np.median((1.0 / (3.0 * st * (1.0 - al * g) * dx)) / d_lpv((1 - m["sigma_s_prime"]) + m["sigma_s_prime"] * g))
+    assert sp["measured"] and sp["ratio"] == pytest.approx(float(want), rel=1e-6)
+    assert [t["setting"] for t in sp["transport"]] == ["tsteady"]
+    lim = {"subject": "s", "relmse": 0.1, "floor": 0.01, "steps": {"measured": False, "why": "x"},
+           "outside": {"measured": False, "why": "x"}, "boundary": {"measured": False, "why": "x"},
+           "speed": sp, "mapping": {"measured": False, "why": "x"}}
+    line = next(x for x in limit_lines(lim) if x.startswith("Lattice speed"))
+    assert "transport + absorb tsteady" in line, line

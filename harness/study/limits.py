@@ -1,7 +1,7 @@
 """What limits SSLPV on each scene, from measured decompositions where the study has the data.
 
 For each scene the *subject* is the best SSLPV setting of the headline (over every SSLPV family of the
-headline, the extension families left out, and budget, by the study's first metric). Four decompositions, each present only where measured:
+headline, the extension families left out, and budget, by the study's first metric). Five decompositions, each present only where measured:
 
 * **steps** (``K`` against ``steady``): the subject's family and settings at ``steady`` against the
   subject at its own K; a paired difference against the scene's reference (delta method), so the
@@ -14,6 +14,12 @@ headline, the extension families left out, and budget, by the study's first metr
 * **boundary** (index-matched against dielectric): for each ``[[twins]]`` pair, the subject's family
   and setting on both scenes; a difference of two scenes, so no paired standard error (different
   references): both noise floors are shown instead.
+* **speed** (how fast the lattice moves light, ``docs/diffusion_mapping.md`` Sec. 11): over the object's
+  cells at the budget's grid, the median of the medium's diffusion coefficient per cell of path,
+  ``l_tr / 3`` cells, over the paper's lattice's per step, ``D_lpv(k1)`` (collision mapping); above 1 a
+  K-step budget carries about the light of ``K D_lpv / D`` cells of diffusive path, and the steady state's
+  diffusion length is ``sqrt(D_lpv / D)`` of the medium's. Beside it, the best row of each ``transport``
+  family the study rendered (the extension that matches the two). Computed from the scene's medium (no render).
 * **mapping** (calibrated, in-sample against held out): for each calibration of the study whose
   ``calibration.json`` lies beside it, the fit's own in-sample and leave-one-scene-out relMSE at the
   subject's budget, as ``sslpv-harness calibrate`` measured them (not re-rendered by the study).
@@ -108,6 +114,45 @@ def _boundary(rows, subject, twins):
     return {"measured": True, "pairs": found}
 
 
+def _speed(rows, scene, metric, budget):
+    """The lattice's diffusion speed against the medium's on ``scene`` (module docstring), and the transport rows."""
+    import numpy as np
+
+    from harness.errors import InputError
+    from harness.scene import load_scene
+    from harness.scene.geometry import grid_inside
+    from sslpv_gl.lattice import d_lpv
+    from sslpv_gl.material import map_material_full, resample_medium
+
+    N = int(budget["grid"])
+    try:
+        sc = load_scene(scene)
+    except InputError as exc:
+        return {"measured": False, "why": f"the scene does not load here ({exc})"}
+    med = sc.medium
+    inside = grid_inside(sc.mesh, med.bbox_min, med.bbox_max, N)
+    st, al, g = (a[inside] for a in resample_medium(med, N, "box"))
+    dx = float(med.bbox_max[0] - med.bbox_min[0]) / N
+    reduced = st * (1.0 - al * g)
+    ok = reduced > 0.0
+    m = map_material_full(st, al, g, dx, "collision")
+    k1 = (1.0 - m["sigma_s_prime"]) + m["sigma_s_prime"] * m["g"]
+    l_tr = 1.0 / (reduced[ok] * dx)
+    ratio = (l_tr / 3.0) / d_lpv(k1[ok])
+    out = {"measured": bool(ok.any()), "grid": N, "l_tr_cells": float(np.median(l_tr)) if ok.any() else None,
+           "ratio": float(np.median(ratio)) if ok.any() else None, "transport": []}
+    if not ok.any():
+        out["why"] = "the object's cells hold no scattering medium"
+    ks = {str(k) for k in budget["steps"]}
+    for fam in sorted({r["family"] for r in rows if r["family"].split(" + ")[0] == "transport"}):
+        cand = [r for r in rows if r["scene"] == scene and r["family"] == fam and r["N"] == N and r["K"] in ks]
+        if cand:
+            best = min(cand, key=lambda r: _rank_value(r, metric))
+            out["transport"].append({"family": fam, "setting": best["setting"], "relmse": best["subsurface_relmse"],
+                                     "energy_ratio": best["subsurface_energy_ratio"]})
+    return out
+
+
 def _mapping(subject, calibrations, budget):
     scene = subject["scene"]
     k = subject["K"] if subject["K"] is not None else None
@@ -134,7 +179,7 @@ def _mapping(subject, calibrations, budget):
 
 
 def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
-    """``{scene: {"subject", "steps", "outside", "boundary", "mapping"}}`` (see the module docstring)."""
+    """``{scene: {"subject", "steps", "outside", "boundary", "speed", "mapping"}}`` (see the module docstring)."""
     images = images or _Images()
     out = {}
     for scene in scenes:
@@ -146,5 +191,5 @@ def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
         out[scene] = {"subject": s["setting"], "relmse": s["subsurface_relmse"],
                       "floor": s["subsurface_relmse_floor"], "steps": _steps(rows, s, images),
                       "outside": _outside(rows, s), "boundary": _boundary(rows, s, twins),
-                      "mapping": _mapping(s, calibrations, budget)}
+                      "speed": _speed(rows, scene, metric, budget), "mapping": _mapping(s, calibrations, budget)}
     return out

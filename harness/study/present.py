@@ -88,6 +88,18 @@ def limit_lines(lim):
                        "no paired SE).")
     else:
         out.append(f"Boundary: not measured ({b['why']}).")
+    sp = lim.get("speed")
+    if sp and sp["measured"]:
+        line = (f"Lattice speed: the medium diffuses {g(sp['ratio'])} times as fast per cell of path as the paper's "
+                f"lattice per step (median over the object's cells at N = {sp['grid']}; reduced mean free path "
+                f"{g(sp['l_tr_cells'])} cells)")
+        if sp["transport"]:
+            line += "; the transport mapping's best: " + ", ".join(
+                f"{t['family']} {t['setting']}: relMSE {g(t['relmse'])}, E {g(t['energy_ratio'])}"
+                for t in sp["transport"])
+        out.append(line + ".")
+    elif sp:
+        out.append(f"Lattice speed: not measured ({sp['why']}).")
     m = lim["mapping"]
     if m["measured"]:
         for f in m["fits"]:
