@@ -99,6 +99,7 @@ def test_projection_inverts_the_camera_rays():
 
 
 @pytest.mark.parametrize("name,field", [("jade_backlit_dielectric", "boundary.kind"), ("skin_torus", "mesh.kind"),
+                                        ("backlit_slab", "mesh.kind"),
                                         ("jade_veins", "medium.sigma_t"), ("mixed_phase", "medium.g")])
 def test_a_scene_it_cannot_model_is_one_line(name, field):
     from harness.scene import load_scene

@@ -55,8 +55,9 @@ incidence on a non-absorbing sphere is ``4 V / S = 4 r / 3`` whatever the scatte
 of Blanco and Fournier 2003, Bénichou et al. 2005); the image's energy against the committed Mitsuba
 reference of ``backlit_sphere``; the projection (P3) against the camera's own rays.
 
-Limits: a sphere only (the mesh is checked: its vertices must lie on one sphere; the radius used is
-that of the sphere with the mesh's volume, so the faceted icosphere's volume is kept); homogeneous
+Limits: a sphere only (the mesh is checked: its vertices must lie on one sphere and it must fill
+:data:`ROUND` of it; the radius used is that of the sphere with the mesh's volume, so the faceted
+icosphere's volume is kept); homogeneous
 media only (a varying ``sigma_t``, albedo or ``g`` is refused); index-matched only (no refraction or
 Fresnel); point lights only; the camera is outside the sphere. Single precision is never used.
 """
@@ -75,6 +76,9 @@ __all__ = ["PathLengths", "SphereScene", "sphere_scene", "trace", "mean_path_iso
 
 #: Relative spread of the vertices' distances from their centroid that still counts as a sphere.
 SPHERE_TOLERANCE = 1e-5
+#: Least volume of the mesh, as a share of the sphere through its vertices (an icosphere of 3 subdivisions
+#: has 0.991, of 4 0.998; a cube 0.368).
+ROUND = 0.99
 #: Relative spread of a medium grid that still counts as constant.
 CONSTANT_TOLERANCE = 1e-6
 #: Russian roulette below this fraction of a photon's emitted power.
@@ -158,6 +162,10 @@ def sphere_scene(scene):
                          "use a scene whose mesh is a sphere")
     tri = v[np.asarray(scene.mesh.faces)] - c
     volume = abs(float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum())) / 6.0
+    if volume < ROUND * 4.0 / 3.0 * np.pi * d.mean() ** 3:     # a cube's corners lie on a sphere too
+        raise InputError(path, "mesh.kind", f"is not a sphere (its volume is {volume / (4.0 / 3.0 * np.pi * d.mean() ** 3):.3f} "
+                         f"of the sphere through its vertices; at least {ROUND} is needed)",
+                         "use a scene whose mesh is a sphere of 3 or more subdivisions")
     radius = (3.0 * volume / (4.0 * np.pi)) ** (1.0 / 3.0)
     lights = tuple((np.asarray(lt.position, np.float64), np.asarray(lt.intensity, np.float64))
                    for lt in scene.lights)
