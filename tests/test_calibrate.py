@@ -152,6 +152,7 @@ class TestBadInput:
         (["--family", "collision", "--boundary-reflect", "rdr", "--outside", "extrapolated"],
          "--boundary-reflect: boundary_reflect:"),
         (["--family", "diffusion", "--skip", "x"], "--skip: skip:"),
+        (["--family", "transport", "--outside", "vacuum"], "--outside: outside: mapping transport needs"),
         (["--family", "diffusion", "--scenes", "thin_ring"], "--scenes: scenes: 1 scene given"),
         (["--family", "diffusion", "--scenes", "thin_ring,nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
         (["--family", "diffusion", "--scenes", "thin_ring,sphere_homogeneous", "--size", "32x32"],

@@ -12,10 +12,14 @@ family          mapping    settings (others: ``SSLPVParams`` defaults)
 ``diffusion``   diffusion  ``skip = 0``: its radiance scale, Eq. (18)-(21) of
                            ``docs/diffusion_mapping.md``, counts every step (Sec. 6 there)
 ``collision``   collision  the paper's ``skip = 2`` (Sec. 4)
+``transport``   transport  ``skip = 2``, ``outside = absorb``: an extension (one step is one cell of
+                           path, ``docs/diffusion_mapping.md`` Sec. 11) that needs an outside
+                           treatment taking light out of the propagation; of the two it supports,
+                           the study's extension table ranks ``absorb`` first (``docs/results.md``)
 ==============  =========  ====================================================================
 
-Both keep ``outside = vacuum``: the calibration asks how well the mapping does as SSLPV
-defines it; ``--outside`` and ``--skip`` change that, and the file records the choice.
+The paper's mappings keep ``outside = vacuum``: the calibration asks how well the mapping does as
+SSLPV defines it; ``--outside`` and ``--skip`` change that, and the file records the choice.
 The scan range of ``sigma_scale`` is wide enough for either family to reach its optimum at
 the suite's budgets (an optimum on the range's edge is flagged in the output).
 """
@@ -45,6 +49,9 @@ FAMILIES = {
     "collision": Family("collision", "collision", {"skip": 2},
                         doc="collision mapping (sslpv_gl.material) with a global radiance scale and a scale on "
                             "sigma_lpv"),
+    "transport": Family("transport", "transport", {"skip": 2, "outside": "absorb"},
+                        doc="transport mapping (an extension: one step is one cell of path) with a global radiance "
+                            "scale and a scale on sigma_lpv"),
 }
 
 #: The fixed mappings every calibration page compares with, each at its own recommended settings.

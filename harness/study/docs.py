@@ -82,7 +82,7 @@ def write_docs(built, out, doc=DOC):
     ext = built.get("extensions")
     if ext and ext["families"]:
         lines += ["## The extensions beside the published method", "",
-                  "Options the paper does not have (`docs/diffusion_mapping.md`, Secs. 8-10), each family against "
+                  "Options the paper does not have (`docs/diffusion_mapping.md`, Secs. 8-11), each family against "
                   "its base (the same mapping without them): per scene, the ratio of the best setting's "
                   f"subsurface {ext['metric']} within the budgets (extension / base) and the paired judgement "
                   f"(better / worse beyond the reference's noise, ≈ within it; Bonferroni over "
