@@ -117,17 +117,22 @@ class TestSteadyState:
         assert all(r < 1e-7 for r in info["residual"])
         assert all(r < 1 for r in info["rho"])
 
+    @staticmethod
+    def _homogeneous_against_twin(c0, sig, sp, g, dx=0.1, steps=500):
+        """Max error of the direct steady solve against ``steps`` iterated twin steps, of max c00."""
+        N = c0.shape[0]
+        accum, _ = steady.steady_state(c0, np.broadcast_to(sig, (N, N, N, 3)), sp, g, dx)
+        prop, twin_accum = propagate(c0, sig, sp, g, dx, steps=steps, skip=2)
+        assert steady.remaining_fraction(prop, c0) < 1e-6
+        return max_err_vs_c00(accum, twin_accum)
+
     def test_homogeneous_absorbing_matches_iterated_twin(self):
         N = 12
         c0 = np.zeros((N, N, N, 3, 4))
         c0[6, 6, 1] = clamped_cosine_coeffs([1.0, 0.0, 0.0])
         c0[5, 7, 1] = 0.5 * clamped_cosine_coeffs([1.0, 0.0, 0.3])
-        dx = 0.1
-        sig = np.array([0.2, 0.5, 1.0])                # per unit length: loss 0.02..0.1 per step
-        accum, info = steady.steady_state(c0, np.broadcast_to(sig, (N, N, N, 3)), 0.6, 0.3, dx)
-        prop, twin_accum = propagate(c0, sig, 0.6, 0.3, dx, steps=500, skip=2)
-        assert steady.remaining_fraction(prop, c0) < 1e-6
-        err = max_err_vs_c00(accum, twin_accum)
+        # per unit length: loss 0.02..0.1 per step
+        err = self._homogeneous_against_twin(c0, np.array([0.2, 0.5, 1.0]), 0.6, 0.3)
         print(f"\nN=12 homogeneous absorbing: steady vs twin (500 steps) max err = {err:.2e} of max c00")
         assert err < 1e-4
 
@@ -137,12 +142,7 @@ class TestSteadyState:
         N = 12
         c0 = np.zeros((N, N, N, 3, 4))
         c0[6, 6, 1] = clamped_cosine_coeffs([1.0, 0.0, 0.0])
-        dx = 0.1
-        sig = np.array([0.5, 1.0, 2.0])                # loss 0.05..0.2 per step
-        accum, info = steady.steady_state(c0, np.broadcast_to(sig, (N, N, N, 3)), 1.0, 2.3, dx)
-        prop, twin_accum = propagate(c0, sig, 1.0, 2.3, dx, steps=500, skip=2)
-        assert steady.remaining_fraction(prop, c0) < 1e-6
-        err = max_err_vs_c00(accum, twin_accum)
+        err = self._homogeneous_against_twin(c0, np.array([0.5, 1.0, 2.0]), 1.0, 2.3)     # loss 0.05..0.2 per step
         print(f"\nN=12 homogeneous, k1 = 2.3: steady vs twin (500 steps) max err = {err:.2e} of max c00")
         assert err < 1e-4
 
