@@ -116,7 +116,7 @@ class TestCommittedCalibrations:
     group), measured with ``harness.metrics``, on two of the fit's scenes.
     """
 
-    @pytest.mark.parametrize("family", ["diffusion", "collision"])
+    @pytest.mark.parametrize("family", ["diffusion", "collision", "transport"])
     def test_in_sample_figures_are_single_renders(self, gl_renderer, family):
         folder = Path(__file__).resolve().parent.parent / "baselines" / "calibrated" / family
         info = json.loads((folder / "calibration.json").read_text())
