@@ -35,7 +35,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path, help="a calibrate --out folder")
     ap.add_argument("--budget", default=None, help='e.g. "N=32 steps=steady" (default: the steady one, else the last)')
-    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_<family>.md")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_<family>[_<outside>].md")
     args = ap.parse_args(argv)
     path = args.dir / "calibration.json"
     if not path.is_file():
@@ -49,7 +49,15 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     r = results[budget]
-    page = Page(f"calibration_{cal['family']}", f"The calibration of the {cal['family']} family")
+    # one page per calibration: named after the family, and after the outside treatment where it is not the
+    # family's own (a family calibrated with another outside treatment is another calibration)
+    from harness.calibration.families import FAMILIES
+
+    own = FAMILIES[cal["family"]].settings.get("outside", "vacuum") if cal["family"] in FAMILIES else "vacuum"
+    outside = cal.get("settings", {}).get("outside", own)
+    extra = "" if outside == own else outside
+    page = Page(f"calibration_{cal['family']}" + (f"_{extra}" if extra else ""),
+                f"The calibration of the {cal['family']} family" + (f" with outside = {extra}" if extra else ""))
     with page.capture(markdown=True):
         _tables(cal, r, budget, results)
     page.finish(args.write)
