@@ -81,14 +81,10 @@ def truth_shares(sphere, mask, dx, photons, seed=0):
 
 def diffusion_speed(sphere, dx):
     """Per channel: the medium's ``D = l_tr / 3`` (cells), the lattice's ``D_lpv(k1)`` (collision mapping)."""
-    from sslpv_gl.lattice import d_lpv
-    from sslpv_gl.material import map_material_full
+    from sslpv_gl.material import lattice_diffusion, medium_diffusion
 
-    st, al, g = sphere.sigma_t, sphere.albedo, sphere.g
-    l_tr = 1.0 / (st * (1.0 - al * g) * dx)
-    m = map_material_full(st, al, g, dx, mapping="collision")
-    k1 = (1.0 - m["sigma_s_prime"]) + m["sigma_s_prime"] * m["g"]
-    return l_tr / 3.0, np.array([d_lpv(float(k)) for k in k1])
+    args = (sphere.sigma_t, sphere.albedo, sphere.g, dx)
+    return medium_diffusion(*args), lattice_diffusion(*args)
 
 
 def outer_ring(sphere, mask):

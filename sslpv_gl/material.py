@@ -160,6 +160,8 @@ __all__ = [
     "PHASE_SCALINGS",
     "delta_eddington",
     "transport_k1",
+    "medium_diffusion",
+    "lattice_diffusion",
     "TRANSPORT_K1_MAX",
     "TRANSPORT_OUTSIDE",
     "check_transport_outside",
@@ -280,15 +282,27 @@ def check_transport_outside(mapping, outside):
                          f"of the propagation, got {outside!r}", "use --outside " + " or ".join(TRANSPORT_OUTSIDE))
 
 
+def medium_diffusion(sigma_t, albedo, g, dx):
+    """The medium's diffusion coefficient in cells^2 per cell of path: ``D = l_tr / 3 = 1 / (3 sigma_t (1 -
+    albedo g) dx)`` (docs Sec. 11); ``inf`` where the reduced extinction is 0."""
+    reduced = np.asarray(sigma_t, dtype=np.float64) * (1.0 - np.asarray(albedo, dtype=np.float64)
+                                                       * np.asarray(g, dtype=np.float64))
+    with np.errstate(divide="ignore"):
+        return np.where(reduced > 0.0, 1.0 / (3.0 * np.maximum(reduced, 1e-300) * float(dx)), np.inf)
+
+
+def lattice_diffusion(sigma_t, albedo, g, dx, mapping="collision"):
+    """The diffusion coefficient ``D_lpv`` (cells^2 per step, Eq. (9)) of the lattice ``mapping`` makes of the
+    medium, through Eq. 3's band-1 factor ``k1 = (1 - sigma_s') + sigma_s' g``."""
+    m = map_material_full(sigma_t, albedo, g, dx, mapping)
+    return lattice.d_lpv((1.0 - m["sigma_s_prime"]) + m["sigma_s_prime"] * m["g"])
+
+
 def transport_k1(sigma_t, albedo, g, dx):
     """The lattice ``g = k1`` of ``transport`` (Eq. (T1)): ``D_lpv(k1) = l_tr / 3``, ``l_tr`` in cells, clipped."""
-    st = np.asarray(sigma_t, dtype=np.float64)
-    reduced = st * (1.0 - np.asarray(albedo, dtype=np.float64) * np.asarray(g, dtype=np.float64))
     d_min, d_max = float(lattice.d_lpv(TRANSPORT_K1_MIN)), float(lattice.d_lpv(TRANSPORT_K1_MAX))
-    with np.errstate(divide="ignore"):
-        D = np.where(reduced > 0.0, 1.0 / (3.0 * np.maximum(reduced, 1e-300) * float(dx)), d_max)
     # Eq. (10) is monotonic between the bounds only (it has a pole below D_lpv(-1)): clip D first
-    k1 = lattice.k1_for_d_lpv(np.clip(D, d_min, d_max))
+    k1 = lattice.k1_for_d_lpv(np.clip(medium_diffusion(sigma_t, albedo, g, dx), d_min, d_max))
     return np.clip(k1, TRANSPORT_K1_MIN, TRANSPORT_K1_MAX)
 
 

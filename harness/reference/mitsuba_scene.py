@@ -407,17 +407,23 @@ def scene_notes(scene):
 
 # --------------------------------------------------------------------------- camera rays and mask
 
-def camera_rays(camera, offsets=((0.5, 0.5),)):
-    """Origins (3,) and unit directions (H, W, S, 3) through pixel positions ``(px + u, py + v)``.
-
-    Follows ``docs/conventions.md``: right = forward x up, NDC y up, row 0 at the top.
-    """
+def camera_frame(camera):
+    """``(origin, forward, right, up)`` of the conventions' look-at (``docs/conventions.md``): right = forward x up,
+    true up = right x forward, all unit vectors."""
     o = np.asarray(camera.origin, float)
     fwd = np.asarray(camera.target, float) - o
     fwd /= np.linalg.norm(fwd)
     right = np.cross(fwd, np.asarray(camera.up, float))
     right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
+    return o, fwd, right, np.cross(right, fwd)
+
+
+def camera_rays(camera, offsets=((0.5, 0.5),)):
+    """Origins (3,) and unit directions (H, W, S, 3) through pixel positions ``(px + u, py + v)``.
+
+    Follows ``docs/conventions.md``: right = forward x up, NDC y up, row 0 at the top.
+    """
+    o, fwd, right, up = camera_frame(camera)
     W, H = camera.width, camera.height
     t = np.tan(np.radians(camera.fov_y_deg) / 2.0)
     uv = np.asarray(offsets, float)

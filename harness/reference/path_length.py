@@ -70,6 +70,7 @@ import math
 import numpy as np
 
 from harness.errors import InputError
+from harness.reference.mitsuba_scene import camera_frame
 from harness.reference.random_walk import _turn, sample_hg
 
 __all__ = ["PathLengths", "SphereScene", "sphere_scene", "trace", "mean_path_isotropic", "hg", "project"]
@@ -187,21 +188,12 @@ def _exit(p, d, centre, radius):
     return -b + np.sqrt(np.maximum(b * b - cc, 0.0))
 
 
-def _frame(camera):
-    o = np.asarray(camera.origin, np.float64)
-    fwd = np.asarray(camera.target, np.float64) - o
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(fwd, np.asarray(camera.up, np.float64))
-    right /= np.linalg.norm(right)
-    return o, fwd, right, np.cross(right, fwd)
-
-
 def project(camera, x):
     """Pixel ``(ix, iy)`` (row 0 at the top; -1 outside the image) and ``cos theta`` of points ``x`` (n, 3).
 
     The inverse of the conventions' ray (``harness.reference.mitsuba_scene.camera_rays``).
     """
-    o, fwd, right, up = _frame(camera)
+    o, fwd, right, up = camera_frame(camera)
     v = x - o
     z = v @ fwd
     t = math.tan(math.radians(camera.fov_y_deg) / 2.0)

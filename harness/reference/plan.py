@@ -439,20 +439,21 @@ class ReferencePlan:
             "files": list(REFERENCE_FILES) + (["absorber.exr"] if absorber else []),
             **ms.scene_notes(self.scene),
         }
-        if ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters and not self.judge_exactness:
-            # A caller that only times renders (benchmarks) skips the verdict; the reference then says it
-            # is not known to be exact, so no accuracy verdict is drawn against it.
-            meta.update(exact=False, exact_note=("not judged: the exactness verdict was skipped "
-                                                 "(render_reference(judge_exactness=False))"))
-        elif ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters:
-            # What the manifold connections leave out, measured (harness.reference.losses); a reference
-            # whose lost light exceeds its share of the noise target says so and is not judged against.
-            from harness.reference import losses
+        if ms.smooth_dielectric(self.scene.boundary) and not self.setup.extra_emitters:
+            if not self.judge_exactness:
+                # A caller that only times renders (benchmarks) skips the verdict; the reference then says it
+                # is not known to be exact, so no accuracy verdict is drawn against it.
+                meta.update(exact=False, exact_note=("not judged: the exactness verdict was skipped "
+                                                     "(render_reference(judge_exactness=False))"))
+            else:
+                # What the manifold connections leave out, measured (harness.reference.losses); a reference
+                # whose lost light exceeds its share of the noise target says so and is not judged against.
+                from harness.reference import losses
 
-            found = losses.measure(self.scene, self.setup.variant,
-                                   limit=losses.LOSS_FRACTION_OF_TARGET * float(self.target))
-            exact, note = losses.verdict(found, self.target)
-            meta.update(mnee_losses=found, exact=exact, exact_note=note)
+                found = losses.measure(self.scene, self.setup.variant,
+                                       limit=losses.LOSS_FRACTION_OF_TARGET * float(self.target))
+                exact, note = losses.verdict(found, self.target)
+                meta.update(mnee_losses=found, exact=exact, exact_note=note)
         with atomic_dir(self.out_dir) as tmp:
             write_exr(tmp / "full.exr", fm, fse)
             write_exr(tmp / "subsurface.exr", sm, sse)

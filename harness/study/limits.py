@@ -121,8 +121,7 @@ def _speed(rows, scene, metric, budget):
     from harness.errors import InputError
     from harness.scene import load_scene
     from harness.scene.geometry import grid_inside
-    from sslpv_gl.lattice import d_lpv
-    from sslpv_gl.material import map_material_full, resample_medium
+    from sslpv_gl.material import lattice_diffusion, medium_diffusion, resample_medium
 
     N = int(budget["grid"])
     try:
@@ -133,13 +132,10 @@ def _speed(rows, scene, metric, budget):
     inside = grid_inside(sc.mesh, med.bbox_min, med.bbox_max, N)
     st, al, g = (a[inside] for a in resample_medium(med, N, "box"))
     dx = float(med.bbox_max[0] - med.bbox_min[0]) / N
-    reduced = st * (1.0 - al * g)
-    ok = reduced > 0.0
-    m = map_material_full(st, al, g, dx, "collision")
-    k1 = (1.0 - m["sigma_s_prime"]) + m["sigma_s_prime"] * m["g"]
-    l_tr = 1.0 / (reduced[ok] * dx)
-    ratio = (l_tr / 3.0) / d_lpv(k1[ok])
-    out = {"measured": bool(ok.any()), "grid": N, "l_tr_cells": float(np.median(l_tr)) if ok.any() else None,
+    D = medium_diffusion(st, al, g, dx)
+    ok = np.isfinite(D)
+    ratio = D[ok] / lattice_diffusion(st, al, g, dx)[ok]
+    out = {"measured": bool(ok.any()), "grid": N, "l_tr_cells": float(np.median(3.0 * D[ok])) if ok.any() else None,
            "ratio": float(np.median(ratio)) if ok.any() else None, "transport": []}
     if not ok.any():
         out["why"] = "the object's cells hold no scattering medium"

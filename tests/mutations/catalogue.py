@@ -652,7 +652,8 @@ MUTATIONS = (
              ("tests/test_study_extensions.py::test_the_transport_mapping_is_judged_against_the_paper_collision",),
              "the transport mapping's families judged against a transport family the study never renders"),
     Mutation("study_speed_without_the_third", "metric", "harness/study/limits.py",
-             "ratio = (l_tr / 3.0) / d_lpv(k1[ok])", "ratio = l_tr / d_lpv(k1[ok])",
+             "ratio = D[ok] / lattice_diffusion(st, al, g, dx)[ok]",
+             "ratio = 3.0 * D[ok] / lattice_diffusion(st, al, g, dx)[ok]",
              ("tests/test_study_extensions.py::test_the_lattice_speed_limit_of_a_scene",),
              "the study's lattice-speed limit compares the medium's reduced mean free path, not its diffusion "
              "coefficient l_tr / 3, with the lattice's"),
