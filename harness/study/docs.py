@@ -1,6 +1,8 @@
 """``sslpv-harness study --docs``: ``docs/results.md`` and its figures, written from a finished study.
 
-The page holds the headline table, the "what limits SSLPV" lines, the Pareto and refinement plots
+The page holds the headline table, the calibration target (:mod:`harness.study.target`: the best
+committed calibration, held out, against the energy and relMSE targets), the "what limits SSLPV" lines,
+the extensions' table, the Pareto and refinement plots
 (copied from the study's ``figures/`` to ``docs/figures/results_*.svg|png``), and is headed by the
 command, the commit and the GL renderer that made it. Nothing in it is typed by hand: run the
 command again to bring it up to date.
@@ -14,7 +16,8 @@ from pathlib import Path
 
 from harness import paths
 from harness.io.atomic import atomic_write
-from harness.study.present import extension_lines, extension_rows, headline_rows, judging_methods, limit_lines
+from harness.study.present import (extension_lines, extension_rows, headline_rows, judging_methods, limit_lines,
+                                   target_table)
 
 DOC = paths.REPO / "docs" / "results.md"
 FIGURES = ("pareto", "refine_k", "refine_n")
@@ -72,6 +75,14 @@ def write_docs(built, out, doc=DOC):
     ]
     for r in headline_rows(head, metrics):
         lines.append(f"| {r['scene']} | {r['floor']} | " + " | ".join(_md_cell(c) for c in r["cells"]) + " |")
+    if built.get("target") is not None:
+        intro, rows, verdict = target_table(built["target"])
+        lines += ["", "## The calibration target", ""]
+        if intro:
+            lines += [intro, "", "| budget | target | needed | measured | met |", "|---|---|---|---|---|"]
+            lines += ["| " + " | ".join(r) + " |" for r in rows]
+            lines.append("")
+        lines.append(verdict)
     lines += ["", "## What limits SSLPV here", ""]
     for scene in head["scenes"]:
         if scene in built["limits"]:

@@ -31,6 +31,7 @@ from harness.study.headline import _Images, headline
 from harness.study.limits import limits
 from harness.study.present import budget_rows, extension_lines, extension_rows, headline_rows, judging_methods, limit_lines
 from harness.study.spec import load_study
+from harness.study.target import scene_info, target
 from harness.study.table import rows_of, write_csv, write_parquet
 
 #: In every study folder; only such folders (or new, empty ones) are written into.
@@ -120,6 +121,7 @@ def build_outputs(out, study, summary, command, key=None):
                   images)
     ext = effects(rows, study["budget"], study["metrics"], study["significance"], images)
     ext["default_outside"] = default_outside(ext)
+    tgt = target(rows, study["calibrations"], study["budget"], scene_info(sorted({r["scene"] for r in rows})))
     names = write_figures(out, paper_rows, head, study)
     reused = sum(r["cached"] for r in rows)
     info = {"title": study["title"], "commit": run.get("git_commit") or git_commit(), "commit_now": git_commit(),
@@ -131,7 +133,7 @@ def build_outputs(out, study, summary, command, key=None):
             "references": _reference_info(summary["references"]), "store": summary["store"],
             "run_id": summary["run_id"], "configurations": len(rows), "reused": reused,
             "rendered": len(rows) - reused, "sweep_wall_s": summary.get("wall_s"), "alpha": ALPHA,
-            "figures": names, "limits": lims, "extensions": ext, "inputs_key": key,
+            "figures": names, "limits": lims, "extensions": ext, "target": tgt, "inputs_key": key,
             "headline": {s: {f: {"setting": c["row"]["setting"], "status": c["status"], "changes": c["changes"]}
                              for f, c in cells.items()} for s, cells in head["overall"].items()}}
     _render_page(out / "index.html", info=info, head=head, metrics=study["metrics"], budget=study["budget"],
@@ -143,7 +145,7 @@ def build_outputs(out, study, summary, command, key=None):
     # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output
     with atomic_write(out / "study.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1, default=str))
-    return {"rows": rows, "head": head, "limits": lims, "extensions": ext, "info": info}
+    return {"rows": rows, "head": head, "limits": lims, "extensions": ext, "target": tgt, "info": info}
 
 
 def run_study(study_path, out, size=None, scheduler=None, workers=None, progress=True, cache=True, command=None,

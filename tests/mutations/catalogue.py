@@ -657,4 +657,22 @@ MUTATIONS = (
              ("tests/test_study_extensions.py::test_the_lattice_speed_limit_of_a_scene",),
              "the study's lattice-speed limit compares the medium's reduced mean free path, not its diffusion "
              "coefficient l_tr / 3, with the lattice's"),
+    Mutation("target_counts_in_sample", "metric", "harness/study/target.py",
+             'held = res.get("held_out") or {}',
+             'held = res.get("in_sample") or {}',
+             ("tests/test_study_target.py::test_the_fitted_scenes_are_judged_held_out_not_in_sample",),
+             "the calibration target judges the fitted scenes by the calibration's in-sample renders, not by its "
+             "leave-one-scene-out validation"),
+    Mutation("target_study_render_at_any_budget", "metric", "harness/study/target.py",
+             'r["family"] == label and r["N"] == grid and r["K"] == str(k):',
+             'r["family"] == label and r["N"] == grid:',
+             ("tests/test_study_target.py::test_the_scenes_no_fit_saw_are_the_studys_renders_at_the_budget",),
+             "the calibration target takes a scene no fit saw from the study's render at any step count, not at "
+             "the budget it judges"),
+    Mutation("target_relmse_against_the_form", "metric", "harness/study/target.py",
+             'if not c.get("form") and m is not None and',
+             'if m is not None and',
+             ("tests/test_study_target.py::test_met_when_every_group_is_in_range_and_the_median_is_half",),
+             "the calibration target's relMSE halving is measured against the best candidate, forms included, "
+             "not against the best scalar calibration"),
 ) + RIVALS + FORM

@@ -1,0 +1,153 @@
+"""The calibration target: the best committed calibrated mapping, held out, against the accuracy targets.
+
+``baselines/calibrated/best/selection.json`` (``sslpv-harness calibrate-best``; ``docs/calibration.md``)
+names the best committed calibration and lists every candidate's held-out medians. For that calibration,
+if the study rendered it, :func:`target` checks at the study's grid N and at each budget of
+:data:`TARGET_STEPS` (K = 32, and the converged ``steady``)::
+
+    (T1) energy ratio (subsurface) in ENERGY_RANGE on at least n - SPARE of the n index-matched
+         scenes the calibration was fitted on, each as the fit's own leave-one-scene-out validation
+         rendered it (the calibration fitted without the scene; its ``calibration.json``)
+    (T2) ... on every dielectric scene of the study
+    (T3) ... on every back-lit homogeneous scene of the study (tags ``back-lit`` and ``homogeneous``)
+         that the calibration was not fitted on
+    (T4) the median held-out relMSE (subsurface) over the fitted scenes at most RELMSE_FACTOR times
+         the lowest such median among the selection's scalar calibrations (one (s, r) pair per
+         budget; the candidates' ``form`` false) at the same budget
+
+A scene of (T2) or (T3) that the calibration was fitted on is taken from its held-out validation like
+(T1); one it was not fitted on is the study's own render with the committed file, held out by
+construction (no fit saw it). A scene with neither is ``missing`` and its group is not met.
+
+Limits: the held-out figures of (T1) are the calibration's, rendered when it was fitted, not by this
+study; (T2) and (T3) judge single renders against the target range, without a noise term (the
+reference's energy noise is on the headline's noise floor column, about 1e-3 of the ratio on the suite);
+the selection must name a calibration of the study, else no target is judged (``"why"`` says so).
+"""
+
+import json
+import statistics
+from pathlib import Path
+
+from harness import paths
+
+#: The committed selection of the best calibration.
+SELECTION = paths.REPO / "baselines" / "calibrated" / "best" / "selection.json"
+#: The budgets the target is judged at (at the study's grid N).
+TARGET_STEPS = (32, "steady")
+#: The energy ratio's target range, the fitted scenes that may miss it, and the relMSE factor.
+ENERGY_RANGE = (0.8, 1.25)
+SPARE = 1
+RELMSE_FACTOR = 0.5
+
+
+def _in_range(e):
+    return e is not None and ENERGY_RANGE[0] <= e <= ENERGY_RANGE[1]
+
+
+def _same_folder(a, b):
+    from sslpv_gl.calibrated import resolve_path
+
+    return resolve_path(str(a)).resolve() == resolve_path(str(b)).resolve()
+
+
+def _winner(selection, calibrations):
+    """``(selection dict, the study's calibration entry of its winner)``; either may be None."""
+    path = Path(selection)
+    if not path.is_file():
+        return None, None
+    sel = json.loads(path.read_text())
+    for cal in calibrations:
+        if _same_folder(Path(cal["file"]).parent, sel["winner"]):
+            return sel, cal
+    return sel, None
+
+
+def _study_value(rows, label, scene, grid, k):
+    for r in rows:
+        if r["scene"] == scene and r["family"] == label and r["N"] == grid and r["K"] == str(k):
+            return r.get("subsurface_energy_ratio"), r.get("subsurface_relmse")
+    return None, None
+
+
+def _entry(scene, fitted, held, rows, label, grid, k):
+    if scene in fitted:
+        h = held.get(scene) or {}
+        return {"scene": scene, "energy_ratio": h.get("energy_ratio"), "relmse": h.get("relmse"),
+                "source": "held out"}
+    e, rel = _study_value(rows, label, scene, grid, k)
+    return {"scene": scene, "energy_ratio": e, "relmse": rel, "source": "not fitted" if e is not None else "missing"}
+
+
+def _group(name, entries, need):
+    inside = [x for x in entries if _in_range(x["energy_ratio"])]
+    return {"group": name, "scenes": entries, "need": need, "of": len(entries), "in_range": len(inside),
+            "met": bool(entries) and len(inside) >= need,
+            "outside": [x for x in entries if not _in_range(x["energy_ratio"])]}
+
+
+def _baseline(sel, key):
+    best = None
+    for c in sel.get("candidates", []):
+        m = (c.get("budgets") or {}).get(key, {}).get("median_held_out_relmse")
+        if not c.get("form") and m is not None and (best is None or m < best[1]):
+            best = (c["folder"], m)
+    return best
+
+
+def scene_info(names):
+    """``{scene: {"dielectric", "tags"}}`` of the named scenes (suite names or folders), as :func:`target` takes it."""
+    from harness.scene import load_scene
+
+    out = {}
+    for name in names:
+        s = load_scene(name)
+        out[name] = {"dielectric": s.boundary.kind == "dielectric", "tags": set(s.tags)}
+    return out
+
+
+def target(rows, calibrations, budget, scenes, selection=SELECTION):
+    """The target of the module docstring: ``{"calibration", "label", "file", "budgets": [...], "met"}``, or
+    ``{"why": ...}`` when it cannot be judged. ``scenes``: ``{scene: {"dielectric": bool, "tags": set}}``
+    of the study's scenes; ``rows``: the study's rows (:mod:`harness.study.table`)."""
+    sel, cal = _winner(selection, calibrations)
+    if sel is None:
+        return {"why": f"no selection of the best calibration ({Path(selection).name} missing)"}
+    if cal is None:
+        return {"why": f"the best calibration ({sel['winner']}) is not one of the study's calibrations"}
+    if not cal.get("report"):
+        return {"why": f"the best calibration ({sel['winner']}) has no calibration.json beside it"}
+    report = json.loads(Path(cal["report"]).read_text())
+    fitted = list(report.get("scenes") or [])
+    grid = budget["grid"]
+    index_matched = [s for s in fitted if not scenes.get(s, {}).get("dielectric")]
+    dielectric = sorted(s for s, i in scenes.items() if i.get("dielectric"))
+    backlit = sorted(s for s, i in scenes.items() if {"back-lit", "homogeneous"} <= set(i.get("tags", ()))
+                     and s not in fitted)
+    out = {"calibration": sel["winner"], "label": cal["label"], "file": cal["file"], "budgets": []}
+    for k in TARGET_STEPS:
+        key = f"N={grid} steps={k}"
+        res = (report.get("results") or {}).get(key)
+        if res is None:
+            out["budgets"].append({"budget": key, "why": f"the calibration has no budget {key}", "met": False})
+            continue
+        held = res.get("held_out") or {}
+        groups = [
+            _group("index-matched, fitted (held out)",
+                   [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in index_matched],
+                   max(len(index_matched) - SPARE, 0)),
+            _group("dielectric", [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in dielectric],
+                   len(dielectric)),
+            _group("back-lit homogeneous, not fitted",
+                   [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in backlit], len(backlit)),
+        ]
+        rel = [held[s]["relmse"] for s in fitted if held.get(s, {}).get("relmse") is not None]
+        median = statistics.median(rel) if rel else None
+        base = _baseline(sel, key)
+        relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
+                  "limit": RELMSE_FACTOR * base[1] if base else None}
+        relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
+        out["budgets"].append({"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
+                               "met": all(g["met"] for g in groups) and relmse["met"]})
+    out["met"] = all(b["met"] for b in out["budgets"])
+    return out

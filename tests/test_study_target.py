@@ -1,0 +1,157 @@
+"""The calibration target of the study (harness/study/target.py): which figures it judges, and how.
+
+Synthetic calibration reports and study rows: each test plants the case that one rule decides.
+"""
+
+import json
+
+import pytest
+
+from harness.study.present import target_table
+from harness.study.target import ENERGY_RANGE, target
+
+BUDGET = {"grid": 32, "steps": [8, 32, "steady"]}
+FITTED = [f"im{i}" for i in range(5)]
+
+
+def _report(held, in_sample=None, steps=(32, "steady")):
+    res = {}
+    for k in steps:
+        res[f"N=32 steps={k}"] = {
+            "held_out": {s: {"energy_ratio": e, "relmse": r} for s, (e, r) in held.items()},
+            "in_sample": {s: {"energy_ratio": e, "relmse": r} for s, (e, r) in (in_sample or held).items()}}
+    return {"scenes": list(held), "results": res}
+
+
+def _setup(tmp_path, held, in_sample=None, candidates=None, steps=(32, "steady")):
+    win = tmp_path / "form"
+    win.mkdir()
+    (win / "calibrated.toml").write_text("")
+    (win / "calibration.json").write_text(json.dumps(_report(held, in_sample, steps)))
+    cands = candidates if candidates is not None else [
+        {"folder": str(win), "form": True, "budgets": {f"N=32 steps={k}": {"median_held_out_relmse": 0.01}
+                                                       for k in steps}},
+        {"folder": "scalar_a", "form": False, "budgets": {f"N=32 steps={k}": {"median_held_out_relmse": 0.2}
+                                                          for k in steps}},
+        {"folder": "scalar_b", "form": False, "budgets": {f"N=32 steps={k}": {"median_held_out_relmse": 0.1}
+                                                          for k in steps}}]
+    sel = tmp_path / "selection.json"
+    sel.write_text(json.dumps({"winner": str(win), "candidates": cands}))
+    cals = [{"file": str(win / "calibrated.toml"), "label": "calibrated collision form",
+             "report": str(win / "calibration.json")}]
+    return sel, cals
+
+
+def _scenes(extra=()):
+    info = {s: {"dielectric": False, "tags": {"homogeneous"}} for s in FITTED}
+    info["glass"] = {"dielectric": True, "tags": {"dielectric"}}
+    info["backlit"] = {"dielectric": False, "tags": {"homogeneous", "back-lit"}}
+    info["front"] = {"dielectric": False, "tags": {"homogeneous"}}          # not fitted, not in the target
+    info.update(dict(extra))
+    return info
+
+
+def _row(scene, k, energy, relmse=0.01):
+    return {"scene": scene, "family": "calibrated collision form", "N": 32, "K": str(k),
+            "subsurface_energy_ratio": energy, "subsurface_relmse": relmse}
+
+
+def _rows(energy=1.0):
+    return [_row(s, k, energy) for s in ("glass", "backlit", "front") for k in (32, "steady")]
+
+
+def _groups(t, k):
+    b = next(b for b in t["budgets"] if b["K"] == str(k))
+    return {g["group"]: g for g in b["groups"]}, b
+
+
+def test_met_when_every_group_is_in_range_and_the_median_is_half(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    assert t["met"] is True
+    groups, b = _groups(t, 32)
+    assert [g["of"] for g in groups.values()] == [5, 1, 1]
+    assert groups["index-matched, fitted (held out)"]["need"] == 4
+    assert b["relmse"]["baseline"] == "scalar_b"                   # the lowest scalar median, the form left out
+    assert b["relmse"]["limit"] == pytest.approx(0.05)
+    intro, rows, verdict = target_table(t)
+    assert "**yes**" in verdict and len(rows) == 8
+
+
+def test_the_fitted_scenes_are_judged_held_out_not_in_sample(tmp_path):
+    held = {s: (1.0, 0.04) for s in FITTED}
+    held["im0"] = held["im1"] = (0.5, 0.04)
+    sel, cals = _setup(tmp_path, held, in_sample={s: (1.0, 0.04) for s in FITTED})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    g = _groups(t, 32)[0]["index-matched, fitted (held out)"]
+    assert g["in_range"] == 3 and g["met"] is False
+    assert sorted(x["scene"] for x in g["outside"]) == ["im0", "im1"]
+    assert t["met"] is False
+
+
+def test_one_fitted_scene_may_miss_and_the_range_is_closed(tmp_path):
+    held = {s: (1.0, 0.04) for s in FITTED}
+    held["im0"] = (2.0, 0.04)
+    held["im1"] = (ENERGY_RANGE[0], 0.04)
+    held["im2"] = (ENERGY_RANGE[1], 0.04)
+    sel, cals = _setup(tmp_path, held)
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    g = _groups(t, 32)[0]["index-matched, fitted (held out)"]
+    assert g["in_range"] == 4 and g["met"] is True
+
+
+def test_the_scenes_no_fit_saw_are_the_studys_renders_at_the_budget(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    rows = [_row("glass", 32, 0.5), _row("glass", "steady", 1.0), _row("glass", 8, 1.0),
+            _row("backlit", 32, 1.0), _row("backlit", "steady", 0.1), _row("front", 32, 3.0)]
+    t = target(rows, cals, BUDGET, _scenes(), selection=sel)
+    g32, _ = _groups(t, 32)
+    gst, _ = _groups(t, "steady")
+    assert g32["dielectric"]["met"] is False and g32["dielectric"]["scenes"][0]["energy_ratio"] == 0.5
+    assert gst["dielectric"]["met"] is True
+    assert g32["back-lit homogeneous, not fitted"]["met"] is True
+    assert gst["back-lit homogeneous, not fitted"]["met"] is False
+    assert not any(x["scene"] == "front" for gr in g32.values() for x in gr["scenes"])   # not in the target
+
+
+def test_a_scene_the_study_did_not_render_is_missing_and_fails_its_group(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    t = target([r for r in _rows() if r["scene"] != "glass"], cals, BUDGET, _scenes(), selection=sel)
+    d = _groups(t, 32)[0]["dielectric"]
+    assert d["scenes"][0]["source"] == "missing" and d["met"] is False
+    assert "(missing)" in " ".join(" ".join(r) for r in target_table(t)[1])
+
+
+def test_a_fitted_dielectric_scene_is_taken_held_out(tmp_path):
+    held = {s: (1.0, 0.04) for s in FITTED}
+    held["glass"] = (0.3, 0.04)
+    sel, cals = _setup(tmp_path, held)
+    t = target(_rows(1.0), cals, BUDGET, _scenes(), selection=sel)
+    groups, _ = _groups(t, 32)
+    assert groups["dielectric"]["scenes"][0]["source"] == "held out"
+    assert groups["dielectric"]["met"] is False
+    assert groups["index-matched, fitted (held out)"]["of"] == 5
+
+
+def test_the_relmse_half(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.06) for s in FITTED})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    b = _groups(t, 32)[1]
+    assert b["relmse"]["median"] == pytest.approx(0.06) and b["relmse"]["met"] is False
+    assert t["met"] is False
+
+
+def test_not_judged_without_the_winner_in_the_study(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    t = target(_rows(), [], BUDGET, _scenes(), selection=sel)
+    assert "not one of the study's calibrations" in t["why"]
+    assert target_table(t)[0] is None
+    assert "missing" in target(_rows(), cals, BUDGET, _scenes(), selection=tmp_path / "none.json")["why"]
+
+
+def test_a_budget_the_calibration_lacks_is_not_met(tmp_path):
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED}, steps=(32,))
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    b = next(b for b in t["budgets"] if b["budget"] == "N=32 steps=steady")
+    assert b["met"] is False and "no budget" in b["why"]
+    assert t["met"] is False
