@@ -12,7 +12,8 @@ budget (default: the steady state, i.e. converged steps):
 * the fitted values of every budget with their standard errors.
 
 It computes nothing: every figure is the calibration's own. ``--write`` puts the tables on the page
-``docs/benchmarks/calibration_<family>.md`` (``benchmarks/page.py``).
+``docs/benchmarks/calibration_<family>.md`` (``benchmarks/page.py``; :func:`page_name`: a calibration with other
+settings or grids than its family's own has a page of its own).
 
 Run: ``.venv/bin/python benchmarks/calibration_table.py DIR [--budget "N=32 steps=steady"] [--write]``
 """
@@ -29,13 +30,37 @@ def _cell(row):
     return f"{row['energy_ratio']:.3g} / {row['relmse']:.3g}" if row else ""
 
 
+#: The renderer settings a calibration is named after where they are not its family's own, and their defaults.
+NAMED_SETTINGS = {"outside": "vacuum", "phase_scaling": "none", "boundary_reflect": "none"}
+
+
+def page_name(cal):
+    """``(page name, title)`` of a calibration: one page per calibration, named after its family, after each
+    setting of :data:`NAMED_SETTINGS` where it is not the family's own (a family calibrated with another outside
+    treatment or phase scaling is another calibration), and after its grids where they are not N = 32."""
+    from harness.calibration.families import FAMILIES
+
+    own = dict(NAMED_SETTINGS, **(FAMILIES[cal["family"]].settings if cal["family"] in FAMILIES else {}))
+    settings = cal.get("settings", {})
+    extras = [(k, settings[k]) for k in NAMED_SETTINGS if k in settings and settings[k] != own[k]]
+    grids = sorted({int(v["N"]) for v in cal["results"].values()})
+    name = f"calibration_{cal['family']}" + "".join("_" + str(v).replace("-", "_") for _, v in extras)
+    title = f"The calibration of the {cal['family']} family"
+    if extras:
+        title += " with " + ", ".join(f"{k} = {v}" for k, v in extras)
+    if grids != [32]:
+        name += "".join(f"_n{n}" for n in grids)
+        title += " at N = " + ", ".join(map(str, grids))
+    return name, title
+
+
 def main(argv=None):
     from page import Page
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path, help="a calibrate --out folder")
     ap.add_argument("--budget", default=None, help='e.g. "N=32 steps=steady" (default: the steady one, else the last)')
-    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_<family>[_<outside>].md")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_<family>[_<setting>...][_n<N>].md")
     args = ap.parse_args(argv)
     path = args.dir / "calibration.json"
     if not path.is_file():
@@ -49,15 +74,8 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     r = results[budget]
-    # one page per calibration: named after the family, and after the outside treatment where it is not the
-    # family's own (a family calibrated with another outside treatment is another calibration)
-    from harness.calibration.families import FAMILIES
-
-    own = FAMILIES[cal["family"]].settings.get("outside", "vacuum") if cal["family"] in FAMILIES else "vacuum"
-    outside = cal.get("settings", {}).get("outside", own)
-    extra = "" if outside == own else outside
-    page = Page(f"calibration_{cal['family']}" + (f"_{extra}" if extra else ""),
-                f"The calibration of the {cal['family']} family" + (f" with outside = {extra}" if extra else ""))
+    name, title = page_name(cal)
+    page = Page(name, title)
     with page.capture(markdown=True):
         _tables(cal, r, budget, results)
     page.finish(args.write)
