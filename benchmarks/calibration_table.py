@@ -30,8 +30,8 @@ def _cell(row):
     return f"{row['energy_ratio']:.3g} / {row['relmse']:.3g}" if row else ""
 
 
-#: The renderer settings a calibration is named after where they are not its family's own, and their defaults.
-NAMED_SETTINGS = {"outside": "vacuum", "phase_scaling": "none", "boundary_reflect": "none"}
+#: The renderer settings a calibration is named after where they are not its family's own.
+NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect")
 
 
 def page_name(cal):
@@ -39,8 +39,10 @@ def page_name(cal):
     setting of :data:`NAMED_SETTINGS` where it is not the family's own (a family calibrated with another outside
     treatment or phase scaling is another calibration), and after its grids where they are not N = 32."""
     from harness.calibration.families import FAMILIES
+    from harness.study.extensions import PAPER
 
-    own = dict(NAMED_SETTINGS, **(FAMILIES[cal["family"]].settings if cal["family"] in FAMILIES else {}))
+    own = dict({k: PAPER[k] for k in NAMED_SETTINGS},
+               **(FAMILIES[cal["family"]].settings if cal["family"] in FAMILIES else {}))
     settings = cal.get("settings", {})
     extras = [(k, settings[k]) for k in NAMED_SETTINGS if k in settings and settings[k] != own[k]]
     grids = sorted({int(v["N"]) for v in cal["results"].values()})

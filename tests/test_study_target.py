@@ -75,7 +75,7 @@ def test_met_when_every_group_is_in_range_and_the_median_is_half(tmp_path):
     assert b["relmse"]["baseline"] == "scalar_b"                   # the lowest scalar median, the form left out
     assert b["relmse"]["limit"] == pytest.approx(0.05)
     intro, rows, verdict = target_table(t)
-    assert "**yes**" in verdict and len(rows) == 8
+    assert "**yes**" in verdict and len(rows) == 8 and f"`{sel.resolve()}` names" in intro
 
 
 def test_the_fitted_scenes_are_judged_held_out_not_in_sample(tmp_path):

@@ -163,7 +163,7 @@ def target_table(t):
     if "why" in t:
         return None, [], f"The calibration target is not judged: {t['why']}."
     lo, hi = ENERGY_RANGE
-    intro = (f"The best committed calibration (`baselines/calibrated/best/selection.json` names "
+    intro = (f"The best committed calibration (`{t['selection']}` names "
              f"`{t['calibration']}`, the study's {t['label']}), held out, at the budgets below "
              "(`harness/study/target.py`): energy ratio (subsurface) in "
              f"[{g(lo)}, {g(hi)}] on all but {SPARE} of the index-matched scenes it was fitted on (as its own "

@@ -143,7 +143,7 @@ def build_outputs(out, study, summary, command, key=None):
                  headline_rows=headline_rows(head, study["metrics"]), budget_rows=budget_rows(head, study["metrics"]),
                  limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims],
                  extension_rows=extension_rows(ext, study["metrics"]), extension_lines=extension_lines(ext),
-                 target_table=target_table(tgt) if tgt is not None else None)
+                 target_table=target_table(tgt))
     # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output
     with atomic_write(out / "study.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1, default=str))

@@ -107,7 +107,7 @@ def scene_info(names):
 
 
 def target(rows, calibrations, budget, scenes, selection=SELECTION):
-    """The target of the module docstring: ``{"calibration", "label", "file", "budgets": [...], "met"}``, or
+    """The target of the module docstring: ``{"selection", "calibration", "label", "file", "budgets": [...], "met"}``, or
     ``{"why": ...}`` when it cannot be judged. ``scenes``: ``{scene: {"dielectric": bool, "tags": set}}``
     of the study's scenes; ``rows``: the study's rows (:mod:`harness.study.table`)."""
     sel, cal = _winner(selection, calibrations)
@@ -124,7 +124,10 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
     dielectric = sorted(s for s, i in scenes.items() if i.get("dielectric"))
     backlit = sorted(s for s, i in scenes.items() if {"back-lit", "homogeneous"} <= set(i.get("tags", ()))
                      and s not in fitted)
-    out = {"calibration": sel["winner"], "label": cal["label"], "file": cal["file"], "budgets": []}
+    where = Path(selection).resolve()
+    shown = where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where
+    out = {"selection": str(shown), "calibration": sel["winner"], "label": cal["label"], "file": cal["file"],
+           "budgets": []}
     for k in TARGET_STEPS:
         key = f"N={grid} steps={k}"
         res = (report.get("results") or {}).get(key)
