@@ -675,4 +675,18 @@ MUTATIONS = (
              ("tests/test_study_target.py::test_met_when_every_group_is_in_range_and_the_median_is_half",),
              "the calibration target's relMSE halving is measured against the best candidate, forms included, "
              "not against the best scalar calibration"),
+    Mutation("twin_mirror_halfway", "physics", "harness/study/twin.py",
+             "return p - 2.0 * float((p - c) @ v) * v", "return p - 1.0 * float((p - c) @ v) * v",
+             ("tests/test_lighting_twin.py::test_the_twin_mirrors_each_light_to_the_other_side",),
+             "the lighting twin moves each light only into the mirror plane, not through it"),
+    Mutation("twin_bound_over_the_channel_mean", "metric", "harness/study/twin.py",
+             "hi_rows = np.where(ok, np.where(ok[:, None], q, -np.inf).max(axis=1), -np.inf)",
+             "hi_rows = np.where(ok, np.where(ok[:, None], q, -np.inf).mean(axis=1), -np.inf)",
+             ("tests/test_lighting_twin.py::test_attainable_takes_the_extremes_over_scale_and_channel",
+              "tests/test_lighting_twin.py::test_the_ratio_of_energy_ratios_is_a_weighted_mean_of_the_twin_factors"),
+             "the lighting twin's attainable ratio (W3) takes the mean of the channels' twin factors, not the largest"),
+    Mutation("twin_factor_inverted", "metric", "harness/study/twin.py",
+             "(e_a / t_a) / (e_b / t_b)", "(e_a / t_a) / (e_b * t_b)",
+             ("tests/test_lighting_twin.py::test_the_ratio_of_energy_ratios_is_a_weighted_mean_of_the_twin_factors",),
+             "the twin factor (W2) multiplies by the twin's truth instead of dividing"),
 ) + RIVALS + FORM

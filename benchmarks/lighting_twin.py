@@ -1,0 +1,183 @@
+"""What no calibration that depends on the material can do for a back-lit object: the lighting twin.
+
+A calibrated mapping (scalar or a form of the material, ``sslpv_gl.material_form``) gives the same
+``sigma_scale`` and ``radiance_scale`` to a scene and to its *lighting twin*, the same scene with its
+lights mirrored to the other side of the object (``harness.study.twin``): the cells' numbers do not
+depend on the lights. The ratio of the two scenes' energy ratios is then fixed by SSLPV within the
+interval of Eq. (W3) there, whatever the radiance scale. This benchmark measures that interval per
+renderer setting and budget, over a scan of ``sigma_scale``:
+
+* **the truth** of both scenes from the path-length tracer (``harness.reference.path_length``, which
+  reproduces the committed Mitsuba references' energy; shown beside the committed reference of the
+  scene itself), per channel over the committed reference's mask;
+* **SSLPV** at grid ``N`` for every mapping and ``outside`` treatment the renderer has (``transport``
+  with the two it allows), the paper's skip of 2, and the collision mapping with ``skip = 0`` and with
+  delta-Eddington scaling, at ``sigma_scale`` from 1e-3 to 1e3 (a third of a decade apart);
+* per budget and setting: the attainable interval of ``rho_A / rho_B`` (W3), whether it meets the
+  band ``[0.64, 1.5625]`` that both scenes in ``[0.8, 1.25]`` need, and the least energy ratio the
+  front-lit twin must have when the back-lit scene is in range (W4);
+* the best committed calibration (``baselines/calibrated/best``) rendered on both scenes.
+
+Usage: ``python benchmarks/lighting_twin.py [--scene backlit_sphere] [--grid 32] [--photons 65536] [--write]``
+(about 20 minutes on 2 cores). ``--write`` writes ``docs/benchmarks/lighting_twin.md``.
+
+Limits: those of ``harness.study.twin`` (a grid of ``sigma_scale``; homogeneous media) and of the
+tracer (index-matched spheres).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from page import Page  # noqa: E402
+
+from harness.errors import InputError  # noqa: E402
+
+BUDGETS = (8, 16, 32, 64, "steady")
+SIGMA_SCALES = tuple(float(x) for x in np.logspace(-3.0, 3.0, 19))
+BEST = Path(__file__).resolve().parents[1] / "baselines" / "calibrated" / "best" / "calibrated.toml"
+
+
+def settings():
+    """``(label, SSLPVParams keyword dict)`` of every setting scanned."""
+    from sslpv_gl.boundary import OUTSIDE_MODES
+    from sslpv_gl.material import TRANSPORT_OUTSIDE
+
+    out = []
+    for mapping in ("literal", "collision", "diffusion", "transport"):
+        for outside in (TRANSPORT_OUTSIDE if mapping == "transport" else OUTSIDE_MODES):
+            out.append((f"{mapping}, {outside}", {"mapping": mapping, "outside": outside}))
+    out.append(("collision, vacuum, skip 0", {"mapping": "collision", "outside": "vacuum", "skip": 0}))
+    out.append(("collision, vacuum, delta-Eddington", {"mapping": "collision", "outside": "vacuum",
+                                                        "phase_scaling": "delta-eddington"}))
+    return out
+
+
+def truth(sphere, mask, photons):
+    """Per channel: the tracer's masked energy and its standard error."""
+    from harness.reference import path_length as pl
+
+    runs = [pl.trace(sphere, c, [0.0], photons=photons, batches=16, seed=0, mask=mask) for c in range(3)]
+    return np.array([r.energy for r in runs]), np.array([r.energy_se for r in runs])
+
+
+def label(b):
+    return "steady" if b == "steady" else f"K = {b}"
+
+
+def main(argv=None):
+    from harness.calibration.run import _reference
+    from harness.io.images import read_exr
+    from harness.reference import path_length as pl
+    from harness.study import twin
+    from sslpv_gl.params import SSLPVParams
+    from sslpv_gl.renderer import SSLPVRenderer
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="backlit_sphere", help="a homogeneous, index-matched sphere scene")
+    ap.add_argument("--grid", type=int, default=32, help="the LPV grid N")
+    ap.add_argument("--photons", type=int, default=1 << 16, help="photons per light and channel for the truth")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/lighting_twin.md")
+    args = ap.parse_args(argv)
+    try:
+        scene, folder = _reference(args.scene, None)
+        front = twin.lighting_twin(scene)
+        spheres = pl.sphere_scene(scene), pl.sphere_scene(front)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    mask = read_exr(folder / "mask.exr")["rgb"][..., 0] >= 0.999
+    ref = twin.channel_energies(read_exr(folder / "subsurface.exr")["rgb"], mask)
+    (t_a, se_a), (t_b, se_b) = (truth(s, mask, args.photons) for s in spheres)
+    rel_se = np.sqrt((se_a / t_a) ** 2 + (se_b / t_b) ** 2)
+
+    renderer = SSLPVRenderer()
+    page = Page("lighting_twin", f"What no calibration that depends on the material can do for a back-lit object: "
+                f"{args.scene} and its lighting twin")
+    page.gl_renderer = renderer.gl_renderer
+    lights = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in scene.lights)
+    lights_b = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in front.lights)
+    page.para(f"Scene A: `{args.scene}` (lights at {lights}). Scene B, its lighting twin: the same mesh, medium, "
+              f"camera and grid with the lights mirrored through the plane through the sphere's centre normal to the "
+              f"view axis ({lights_b}). A calibration, scalar or a form of the material, gives both the same "
+              f"`sigma_scale` and `radiance_scale`, so the ratio of their energy ratios, rho_A / rho_B, is a weighted "
+              f"mean of the per-channel twin factors q_c(s) (Eqs. W1-W3 of `harness.study.twin`). Grid N = {args.grid}; "
+              f"`sigma_scale` s at {len(SIGMA_SCALES)} points from {SIGMA_SCALES[0]:g} to {SIGMA_SCALES[-1]:g}.")
+    page.heading("The truth of both scenes")
+    page.table(["channel", "A: tracer", "A: committed Mitsuba reference", "A tracer / Mitsuba", "B: tracer",
+                "T_A / T_B"],
+               [[c, f"{t_a[i]:.4g} ± {se_a[i]:.2g}", f"{ref[i]:.4g}", f"{t_a[i] / ref[i]:.4f}",
+                 f"{t_b[i]:.4g} ± {se_b[i]:.2g}", f"{t_a[i] / t_b[i]:.4f} ± {t_a[i] / t_b[i] * rel_se[i]:.4f}"]
+                for i, c in enumerate("RGB")],
+               note=f"Masked energy per channel, {args.photons} photons per light and channel. The twin factors below "
+                    f"carry the truth's relative standard error, {rel_se.max():.2%} at most.")
+
+    results = {b: [] for b in BUDGETS}
+    curves = {}
+    for name, kw in settings():
+        params = SSLPVParams(N=args.grid, **kw)
+        energies = twin.scan(renderer, scene, front, params, SIGMA_SCALES, BUDGETS, mask)
+        for b in BUDGETS:
+            e_a, e_b = energies[b]
+            q = twin.twin_factors(e_a, t_a, e_b, t_b)
+            low, high, i_lo, i_hi = twin.attainable(q)
+            results[b].append((name, q, low, high, i_lo, i_hi, int((~np.isfinite(q).all(axis=1)).sum())))
+            if name == "collision, vacuum":
+                curves[b] = q
+        print(f"{name}: done", file=sys.stderr)
+
+    page.heading("The attainable ratio per setting and budget")
+    page.para("\"low\", \"high\": the least and largest twin factor over every s scanned and channel (W3), with the s "
+              "where each is reached. Both scenes in [0.8, 1.25] need rho_A / rho_B in [0.64, 1.5625]; \"B at least\": "
+              "the twin's least energy ratio when A is in range (W4). \"unusable\": points of the scan with a dark "
+              "or failed render.")
+    summary = []
+    for b in BUDGETS:
+        rows, best = [], None
+        for name, q, low, high, i_lo, i_hi, bad in results[b]:
+            if low is None:
+                rows.append([name, "-", "-", "no usable point", "-", str(bad)])
+                continue
+            v = twin.verdict(low, high)
+            rows.append([name, f"{low:.3g} (s = {SIGMA_SCALES[i_lo]:.3g})", f"{high:.3g} (s = {SIGMA_SCALES[i_hi]:.3g})",
+                         "yes" if v["possible"] else "no", f"{v['twin_at_least']:.3g}", str(bad)])
+            if best is None or high > best[1]:
+                best = (name, high, v)
+        page.heading(f"At {label(b)}")
+        page.table(["setting", "low", "high", "both in range possible", "B at least", "unusable"], rows)
+        n_possible = sum(1 for r in rows if r[3] == "yes")
+        summary.append([label(b), f"{n_possible} of {len(rows)}", best[0], f"{best[1]:.3g}",
+                        f"{best[2]['twin_at_least']:.3g}"])
+    page.heading("Summary")
+    page.table(["budget", "settings where both can be in range", "setting with the largest ratio",
+                "largest rho_A / rho_B", "B at least, with that setting"], summary,
+               note="Where no setting can put both in range, a calibration that puts A in [0.8, 1.25] renders the "
+                    "same object lit from the front at least \"B at least\" times its truth.")
+    page.heading("The twin factor of the paper's setting (collision, vacuum) against s")
+    page.table(["s"] + [label(b) + " (R / G / B)" for b in BUDGETS],
+               [[f"{s:.3g}"] + [" / ".join(f"{x:.3g}" for x in curves[b][i]) for b in BUDGETS]
+                for i, s in enumerate(SIGMA_SCALES)])
+
+    rows = []
+    for b in BUDGETS:
+        p = SSLPVParams(N=args.grid, steps=b, mapping=f"calibrated:{BEST}")
+        e = [twin.channel_energies(renderer.render(sc, p).subsurface, mask) for sc in (scene, front)]
+        rho_a = float(np.mean(e[0] / t_a))
+        rho_b = float(np.mean(e[1] / t_b))
+        rows.append([label(b), f"{rho_a:.3g}", f"{rho_b:.3g}", f"{rho_a / rho_b:.3g}"])
+    page.heading("The best committed calibration on both scenes")
+    page.table(["budget", "A: energy ratio", "B: energy ratio", "rho_A / rho_B"], rows,
+               note=f"`--mapping calibrated:{BEST.relative_to(BEST.parents[3])}` at N = {args.grid}; energy ratio "
+                    "against the tracer's truth (the mean of the per-channel ratios).")
+    page.finish(args.write)
+
+
+if __name__ == "__main__":
+    main()
