@@ -296,6 +296,10 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
             info["residual"].append(0.0)
             info["rho"].append(None)
             continue
+        # the series is linear in b: solve for b / max|b| and scale back, so that a source of tiny values
+        # (a cell's light absorbed to near the underflow) does not underflow the norms of the residual
+        scale = float(np.abs(b).max())
+        b = b / scale
 
         rho = None
         if check_spectrum:
@@ -344,7 +348,7 @@ def steady_state(c0, sigma_lpv, sigma_s_prime, g, dx, skip=2, matrices=None, rto
             _bad("steady_state", f"colour {col}: {method} {why} (relative residual {res:.3g}, rtol {rtol:g}, "
                  f"spectral radius {rho_txt}); the series converges too slowly or not at all",
                  "add absorption, raise maxiter, or use propagate_until")
-        accum[..., col, :] = op.grid(x)
+        accum[..., col, :] = op.grid(x) * scale
         info["iterations"].append(int(iters[0]))
         info["products"].append(skip + 1 + op.products + 2)
         info["residual"].append(res)

@@ -117,6 +117,17 @@ class TestSteadyState:
         assert all(r < 1e-7 for r in info["residual"])
         assert all(r < 1 for r in info["rho"])
 
+    def test_the_solve_is_linear_in_the_source_down_to_the_underflow(self):
+        """A source of tiny values (light absorbed to near the underflow in a strongly absorbing lattice)
+        gives the scaled solution, not a failed solve: the residual's norms must not underflow."""
+        rng = np.random.default_rng(1)
+        c0, sig, sp, g, dx = sphere_scene(12, rng)
+        a, _ = steady.steady_state(c0, sig, sp, g, dx)
+        for f in (1e-300, 1e-170, 1e100):
+            b, info = steady.steady_state(c0 * f, sig, sp, g, dx)
+            assert np.abs(b / f - a).max() <= 1e-12 * np.abs(a).max()
+            assert all(r < 1e-7 for r in info["residual"])
+
     @staticmethod
     def _homogeneous_against_twin(c0, sig, sp, g, dx=0.1, steps=500):
         """Max error of the direct steady solve against ``steps`` iterated twin steps, of max c00."""

@@ -689,4 +689,8 @@ MUTATIONS = (
              "(e_a / t_a) / (e_b / t_b)", "(e_a / t_a) / (e_b * t_b)",
              ("tests/test_lighting_twin.py::test_the_ratio_of_energy_ratios_is_a_weighted_mean_of_the_twin_factors",),
              "the twin factor (W2) multiplies by the twin's truth instead of dividing"),
+    Mutation("steady_residual_unscaled", "physics", "sslpv_gl/steady.py",
+             "scale = float(np.abs(b).max())", "scale = 1.0",
+             ("tests/test_steady.py::TestSteadyState::test_the_solve_is_linear_in_the_source_down_to_the_underflow",),
+             "the steady solve measures its residual on the unscaled source, whose norms underflow for a tiny one"),
 ) + RIVALS + FORM
