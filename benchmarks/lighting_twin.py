@@ -7,9 +7,12 @@ depend on the lights. The ratio of the two scenes' energy ratios is then fixed b
 interval of Eq. (W3) there, whatever the radiance scale. This benchmark measures that interval per
 renderer setting and budget, over a scan of ``sigma_scale``:
 
-* **the truth** of both scenes from the path-length tracer (``harness.reference.path_length``, which
-  reproduces the committed Mitsuba references' energy; shown beside the committed reference of the
-  scene itself), per channel over the committed reference's mask;
+* **the truth** of both scenes, per channel over the committed reference's mask: from the path-length
+  tracer (``harness.reference.path_length``, which reproduces the committed Mitsuba references' energy)
+  where it models the scene, beside the scene's own reference; otherwise (``--truth mitsuba``, any
+  homogeneous scene: a non-convex or scanned mesh, a dielectric boundary) the scene's reference and a
+  Mitsuba reference of the twin rendered at the same size and noise target (``render_reference``).
+  ``--mitsuba-check`` renders the twin's reference beside the tracer's truth too, as a second route;
 * **SSLPV** at grid ``N`` for every mapping and ``outside`` treatment the renderer has (``transport``
   with the two it allows), the paper's skip of 2, and the collision mapping with ``skip = 0`` and with
   delta-Eddington scaling, at ``sigma_scale`` from 1e-4 to 1e3 (a third of a decade apart);
@@ -18,17 +21,21 @@ renderer setting and budget, over a scan of ``sigma_scale``:
   front-lit twin must have when the back-lit scene is in range (W4);
 * the best committed calibration (``baselines/calibrated/best``) rendered on both scenes.
 
-Usage: ``python benchmarks/lighting_twin.py [--scene backlit_sphere] [--grid 32] [--photons 65536] [--write]``
-(about 20 minutes on 2 cores). ``--write`` writes ``docs/benchmarks/lighting_twin.md``.
+Usage: ``python benchmarks/lighting_twin.py [--scene backlit_sphere] [--grid 32] [--photons 65536]
+[--truth auto|tracer|mitsuba] [--mitsuba-check] [--write]`` (about 20 minutes on 2 cores, and the twin's
+reference with Mitsuba). ``--write`` writes ``docs/benchmarks/lighting_twin.md``, or
+``lighting_twin_<scene>.md`` for a scene other than ``backlit_sphere``.
 
-Limits: those of ``harness.study.twin`` (a grid of ``sigma_scale``; homogeneous media) and of the
-tracer (index-matched spheres).
+Limits: those of ``harness.study.twin`` (a grid of ``sigma_scale``; homogeneous media); the tracer's
+truth needs an index-matched sphere; a Mitsuba truth's standard error takes the pixels' errors as
+independent.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +75,34 @@ def truth(sphere, mask, photons):
     return np.array([r.energy for r in runs]), np.array([r.energy_se for r in runs])
 
 
+def mitsuba_energy(folder, mask):
+    """Per channel: a reference folder's masked subsurface energy and its standard error (pixels independent)."""
+    from harness.io.images import read_exr
+
+    img = read_exr(Path(folder) / "subsurface.exr")
+    m = np.asarray(mask, bool)
+    return img["rgb"][m].astype(np.float64).sum(axis=0), np.sqrt((img["se"][m].astype(np.float64) ** 2).sum(axis=0))
+
+
+def mitsuba_twin(front, folder_a, mask, out):
+    """Render the twin's reference into ``out`` at the noise target of the scene's own; its energy and SE."""
+    import json
+
+    from harness.io.images import read_exr
+    from harness.reference.render import render_reference
+
+    target = float(json.loads((Path(folder_a) / "reference.json").read_text())["target_rel_se"])
+    meta = render_reference(front, out, target_rel_se=target)
+    if meta.get("exact") is False:
+        raise SystemExit(f"error: {out}: exact: the twin's reference is not exact ({meta.get('exact_note', '')}); "
+                         "use a scene whose reference can be exact")
+    mask_b = read_exr(Path(out) / "mask.exr")["rgb"][..., 0] >= 0.999
+    if not np.array_equal(mask_b, mask):
+        raise SystemExit(f"error: {out}: mask: the twin's mask differs from the scene's; the lights must not "
+                         "change which pixels see the object")
+    return mitsuba_energy(out, mask), float(meta.get("render_seconds", float("nan")))
+
+
 def label(b):
     return "steady" if b == "steady" else f"K = {b}"
 
@@ -84,22 +119,43 @@ def main(argv=None):
     ap.add_argument("--scene", default="backlit_sphere", help="a homogeneous, index-matched sphere scene")
     ap.add_argument("--grid", type=int, default=32, help="the LPV grid N")
     ap.add_argument("--photons", type=int, default=1 << 16, help="photons per light and channel for the truth")
+    ap.add_argument("--truth", choices=("auto", "tracer", "mitsuba"), default="auto",
+                    help="the truth of both scenes: the path-length tracer (index-matched spheres), Mitsuba "
+                         "(the scene's reference and one rendered for the twin), or auto (the tracer where it can)")
+    ap.add_argument("--mitsuba-check", action="store_true",
+                    help="with the tracer's truth, render the twin's Mitsuba reference too, as a second route")
     ap.add_argument("--write", action="store_true", help="write docs/benchmarks/lighting_twin.md")
     args = ap.parse_args(argv)
     try:
         scene, folder = _reference(args.scene, None)
+        twin.check_homogeneous(scene)
         front = twin.lighting_twin(scene)
-        spheres = pl.sphere_scene(scene), pl.sphere_scene(front)
+        spheres = None
+        if args.truth != "mitsuba":
+            try:
+                spheres = pl.sphere_scene(scene), pl.sphere_scene(front)
+            except InputError:
+                if args.truth == "tracer":
+                    raise
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
     mask = read_exr(folder / "mask.exr")["rgb"][..., 0] >= 0.999
-    ref = twin.channel_energies(read_exr(folder / "subsurface.exr")["rgb"], mask)
-    (t_a, se_a), (t_b, se_b) = (truth(s, mask, args.photons) for s in spheres)
+    ref, ref_se = mitsuba_energy(folder, mask)
+    check = None
+    with tempfile.TemporaryDirectory(prefix="lighting_twin_") as tmp:
+        if spheres is None:
+            (t_b, se_b), seconds = mitsuba_twin(front, folder, mask, Path(tmp) / "twin")
+            t_a, se_a = ref, ref_se
+        else:
+            (t_a, se_a), (t_b, se_b) = (truth(s, mask, args.photons) for s in spheres)
+            if args.mitsuba_check:
+                check = mitsuba_twin(front, folder, mask, Path(tmp) / "twin")
     rel_se = np.sqrt((se_a / t_a) ** 2 + (se_b / t_b) ** 2)
 
     renderer = SSLPVRenderer()
-    page = Page("lighting_twin", f"What no calibration that depends on the material can do for a back-lit object: "
+    name = "lighting_twin" if args.scene == "backlit_sphere" else "lighting_twin_" + Path(args.scene).name
+    page = Page(name, f"What no calibration that depends on the material can do for a back-lit object: "
                 f"{args.scene} and its lighting twin")
     page.gl_renderer = renderer.gl_renderer
     lights = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in scene.lights)
@@ -111,13 +167,30 @@ def main(argv=None):
               f"mean of the per-channel twin factors q_c(s) (Eqs. W1-W3 of `harness.study.twin`). Grid N = {args.grid}; "
               f"`sigma_scale` s at {len(SIGMA_SCALES)} points from {SIGMA_SCALES[0]:g} to {SIGMA_SCALES[-1]:g}.")
     page.heading("The truth of both scenes")
-    page.table(["channel", "A: tracer", "A: committed Mitsuba reference", "A tracer / Mitsuba", "B: tracer",
-                "T_A / T_B"],
-               [[c, f"{t_a[i]:.4g} ± {se_a[i]:.2g}", f"{ref[i]:.4g}", f"{t_a[i] / ref[i]:.4f}",
-                 f"{t_b[i]:.4g} ± {se_b[i]:.2g}", f"{t_a[i] / t_b[i]:.4f} ± {t_a[i] / t_b[i] * rel_se[i]:.4f}"]
-                for i, c in enumerate("RGB")],
-               note=f"Masked energy per channel, {args.photons} photons per light and channel. The twin factors below "
-                    f"carry the truth's relative standard error, {rel_se.max():.2%} at most.")
+    if spheres is None:
+        page.table(["channel", "A: Mitsuba reference", "B: Mitsuba reference", "T_A / T_B"],
+                   [[c, f"{t_a[i]:.4g} ± {se_a[i]:.2g}", f"{t_b[i]:.4g} ± {se_b[i]:.2g}",
+                     f"{t_a[i] / t_b[i]:.4f} ± {t_a[i] / t_b[i] * rel_se[i]:.4f}"] for i, c in enumerate("RGB")],
+                   note=f"Masked subsurface energy per channel; B's reference rendered here in {seconds:.0f} s. The twin "
+                        f"factors below carry the truth's relative standard error, {rel_se.max():.2%} at most.")
+    else:
+        head = ["channel", "A: tracer", "A: Mitsuba reference", "A tracer / Mitsuba", "B: tracer"]
+        rows = [[c, f"{t_a[i]:.4g} ± {se_a[i]:.2g}", f"{ref[i]:.4g} ± {ref_se[i]:.2g}", f"{t_a[i] / ref[i]:.4f}",
+                 f"{t_b[i]:.4g} ± {se_b[i]:.2g}"] for i, c in enumerate("RGB")]
+        if check is not None:
+            (m_b, m_se), _ = check
+            head += ["B: Mitsuba reference", "B tracer / Mitsuba"]
+            for i, row in enumerate(rows):
+                row += [f"{m_b[i]:.4g} ± {m_se[i]:.2g}", f"{t_b[i] / m_b[i]:.4f} ± "
+                        f"{t_b[i] / m_b[i] * np.hypot(se_b[i] / t_b[i], m_se[i] / m_b[i]):.4f}"]
+        head.append("T_A / T_B")
+        for i, row in enumerate(rows):
+            row.append(f"{t_a[i] / t_b[i]:.4f} ± {t_a[i] / t_b[i] * rel_se[i]:.4f}")
+        page.table(head, rows,
+                   note=f"Masked subsurface energy per channel; the tracer with {args.photons} photons per light and "
+                        "channel. The twin factors below carry the truth's relative standard error (the tracer's), "
+                        f"{rel_se.max():.2%} at most."
+                        + (f" B's Mitsuba reference was rendered here in {check[1]:.0f} s." if check else ""))
 
     results = {b: [] for b in BUDGETS}
     curves = {}
@@ -185,7 +258,7 @@ def main(argv=None):
     page.heading("The best committed calibration on both scenes")
     page.table(["budget", "A: energy ratio", "B: energy ratio", "rho_A / rho_B"], rows,
                note=f"`--mapping calibrated:{BEST.relative_to(BEST.parents[3])}` at N = {args.grid}; energy ratio "
-                    "against the tracer's truth (the mean of the per-channel ratios).")
+                    "against the truth above (the mean of the per-channel ratios).")
     page.finish(args.write)
 
 

@@ -54,7 +54,7 @@ import numpy as np
 
 from harness.errors import InputError
 
-__all__ = ["mirror_light", "lighting_twin", "channel_energies", "twin_factors", "attainable", "verdict", "scan"]
+__all__ = ["mirror_light", "lighting_twin", "check_homogeneous", "channel_energies", "twin_factors", "attainable", "verdict", "scan"]
 
 
 def mirror_light(position, centre, camera):
@@ -81,6 +81,15 @@ def lighting_twin(scene):
                              "view axis, so it has no mirror image", "use a scene lit from in front or behind")
         lights.append(dataclasses.replace(light, position=tuple(float(x) for x in q)))
     return dataclasses.replace(scene, lights=tuple(lights))
+
+
+def check_homogeneous(scene):
+    """One line (:class:`InputError`) unless ``sigma_t``, albedo and ``g`` are each one value per channel."""
+    for name in ("sigma_t", "albedo", "g"):
+        grid = np.asarray(getattr(scene.medium, name), np.float64)
+        if not np.allclose(grid, grid.reshape(-1, grid.shape[-1])[0] if grid.ndim > 3 else grid.flat[0]):
+            raise InputError(scene.path / "scene.toml" if scene.path is not None else scene.name, f"medium.{name}",
+                             "varies, so each cell has its own calibrated scale", "use a homogeneous scene")
 
 
 def channel_energies(image, mask):
@@ -134,11 +143,7 @@ def scan(renderer, scene_a, scene_b, params, sigma_scales, budgets, mask):
     step counts and/or ``"steady"``. Returns ``{budget: (e_a, e_b)}`` with ``e_*`` (n_s, 3); a render
     that fails (a steady solve that does not converge) gives a row of ``nan``."""
     for sc in (scene_a, scene_b):
-        for name in ("sigma_t", "albedo", "g"):
-            grid = np.asarray(getattr(sc.medium, name), np.float64)
-            if not np.allclose(grid, grid.reshape(-1, grid.shape[-1])[0] if grid.ndim > 3 else grid.flat[0]):
-                raise InputError(sc.path / "scene.toml" if sc.path is not None else sc.name, f"medium.{name}",
-                                 "varies, so each cell has its own calibrated scale", "use a homogeneous scene")
+        check_homogeneous(sc)
     ints = sorted(b for b in budgets if b != "steady")
     out = {b: (np.full((len(sigma_scales), 3), np.nan), np.full((len(sigma_scales), 3), np.nan)) for b in budgets}
     for i, s in enumerate(sigma_scales):
