@@ -161,8 +161,8 @@ def main(argv=None):
     lights = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in scene.lights)
     lights_b = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in front.lights)
     page.para(f"Scene A: `{args.scene}` (lights at {lights}). Scene B, its lighting twin: the same mesh, medium, "
-              f"camera and grid with the lights mirrored through the plane through the sphere's centre normal to the "
-              f"view axis ({lights_b}). A calibration, scalar or a form of the material, gives both the same "
+              f"camera and grid with the lights mirrored through the plane through the object's centre (the mean of "
+              f"its vertices) normal to the view axis ({lights_b}). A calibration, scalar or a form of the material, gives both the same "
               f"`sigma_scale` and `radiance_scale`, so the ratio of their energy ratios, rho_A / rho_B, is a weighted "
               f"mean of the per-channel twin factors q_c(s) (Eqs. W1-W3 of `harness.study.twin`). Grid N = {args.grid}; "
               f"`sigma_scale` s at {len(SIGMA_SCALES)} points from {SIGMA_SCALES[0]:g} to {SIGMA_SCALES[-1]:g}.")
