@@ -73,7 +73,7 @@ from harness.errors import InputError
 from harness.reference.mitsuba_scene import camera_frame
 from harness.reference.random_walk import _turn, sample_hg
 
-__all__ = ["PathLengths", "SphereScene", "sphere_scene", "trace", "mean_path_isotropic", "hg", "project"]
+__all__ = ["PathLengths", "SphereScene", "sphere_scene", "constant_channels", "trace", "mean_path_isotropic", "hg", "project"]
 
 #: Relative spread of the vertices' distances from their centroid that still counts as a sphere.
 SPHERE_TOLERANCE = 1e-5
@@ -140,12 +140,13 @@ def hg(cos, g):
     return (1.0 - g * g) / (4.0 * np.pi * (1.0 + g * g - 2.0 * g * cos) ** 1.5)
 
 
-def _constant(grid, name, path):
+def constant_channels(grid, name, path, why="the path-length tracer models a homogeneous sphere"):
+    """The one value per colour channel of the medium grid ``name``, or a one-line error (``why`` says what
+    needs it constant) where it varies by more than :data:`CONSTANT_TOLERANCE`."""
     v = np.asarray(grid, np.float64).reshape(-1, 3)
     lo, hi = v.min(0), v.max(0)
     if np.any(hi - lo > CONSTANT_TOLERANCE * np.maximum(np.abs(hi), 1e-300)):
-        raise InputError(path, f"medium.{name}", "varies across the grid; the path-length tracer models a "
-                         "homogeneous sphere", "use a scene with a constant medium")
+        raise InputError(path, f"medium.{name}", f"varies across the grid; {why}", "use a scene with a constant medium")
     return v[0].copy()
 
 
@@ -176,8 +177,9 @@ def sphere_scene(scene):
     if np.linalg.norm(np.asarray(scene.camera.origin, np.float64) - c) <= radius:
         raise InputError(path, "camera.origin", "lies inside the sphere", "move the camera outside")
     med = scene.medium
-    return SphereScene(c, radius, _constant(med.sigma_t, "sigma_t", path), _constant(med.albedo, "albedo", path),
-                       _constant(med.g, "g", path), lights, scene.camera)
+    return SphereScene(c, radius, constant_channels(med.sigma_t, "sigma_t", path),
+                       constant_channels(med.albedo, "albedo", path), constant_channels(med.g, "g", path), lights,
+                       scene.camera)
 
 
 def _exit(p, d, centre, radius):

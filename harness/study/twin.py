@@ -53,6 +53,7 @@ import dataclasses
 import numpy as np
 
 from harness.errors import InputError
+from harness.reference.path_length import constant_channels
 
 __all__ = ["mirror_light", "lighting_twin", "check_homogeneous", "channel_energies", "twin_factors", "attainable", "verdict", "scan"]
 
@@ -76,20 +77,23 @@ def lighting_twin(scene):
     for light in scene.lights:
         q = mirror_light(light.position, centre, scene.camera)
         if np.allclose(q, light.position, rtol=0.0, atol=1e-9 * (1.0 + np.abs(q).max())):
-            where = scene.path / "scene.toml" if scene.path is not None else scene.name
-            raise InputError(where, "lights.position", "lies in the plane through the object's centre normal to the "
+            raise InputError(_file(scene), "lights.position", "lies in the plane through the object's centre normal to the "
                              "view axis, so it has no mirror image", "use a scene lit from in front or behind")
         lights.append(dataclasses.replace(light, position=tuple(float(x) for x in q)))
     return dataclasses.replace(scene, lights=tuple(lights))
 
 
 def check_homogeneous(scene):
-    """One line (:class:`InputError`) unless ``sigma_t``, albedo and ``g`` are each one value per channel."""
+    """One line (:class:`InputError`) unless ``sigma_t``, albedo and ``g`` are each one value per channel
+    (:func:`harness.reference.path_length.constant_channels`)."""
     for name in ("sigma_t", "albedo", "g"):
-        grid = np.asarray(getattr(scene.medium, name), np.float64)
-        if not np.allclose(grid, grid.reshape(-1, grid.shape[-1])[0] if grid.ndim > 3 else grid.flat[0]):
-            raise InputError(scene.path / "scene.toml" if scene.path is not None else scene.name, f"medium.{name}",
-                             "varies, so each cell has its own calibrated scale", "use a homogeneous scene")
+        constant_channels(getattr(scene.medium, name), name, _file(scene),
+                          why="each cell would have its own calibrated scale")
+
+
+def _file(scene):
+    """The scene's file for an error line (its name where it was built in memory)."""
+    return scene.path / "scene.toml" if scene.path is not None else scene.name
 
 
 def channel_energies(image, mask):
@@ -115,8 +119,8 @@ def attainable(q):
     ok = np.isfinite(q).all(axis=1)
     if not ok.any():
         return None, None, None, None
-    hi_rows = np.where(ok, np.where(ok[:, None], q, -np.inf).max(axis=1), -np.inf)
-    lo_rows = np.where(ok, np.where(ok[:, None], q, np.inf).min(axis=1), np.inf)
+    hi_rows = np.where(ok[:, None], q, -np.inf).max(axis=1)
+    lo_rows = np.where(ok[:, None], q, np.inf).min(axis=1)
     i_hi, i_lo = int(np.argmax(hi_rows)), int(np.argmin(lo_rows))
     return float(lo_rows[i_lo]), float(hi_rows[i_hi]), i_lo, i_hi
 
