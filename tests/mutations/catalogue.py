@@ -693,4 +693,9 @@ MUTATIONS = (
              "scale = float(np.abs(b).max())", "scale = 1.0",
              ("tests/test_steady.py::TestSteadyState::test_the_solve_is_linear_in_the_source_down_to_the_underflow",),
              "the steady solve measures its residual on the unscaled source, whose norms underflow for a tiny one"),
+    Mutation("tracer_without_shading_normal_correction", "physics", "harness/reference/specular_paths.py",
+             "return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)", "return np.ones(len(num))",
+             ("tests/test_specular_paths.py::test_tracer_follows_the_camera_transport_where_the_shading_normal_tilts",),
+             "the photon tracer bends its photons about the shading normal without the adjoint factor, so it carries "
+             "other light than the camera sees where the shading normal tilts"),
 ) + RIVALS + FORM
