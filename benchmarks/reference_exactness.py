@@ -52,6 +52,11 @@ def committed_boundary(name, boundary):
     if not meta.is_file():
         return None
     integ = json.loads(meta.read_text()).get("integrator", {})
+    if set(integ) == set("RGB"):                # one grey pass per channel: one block each, the same connections
+        blocks = [{k: v for k, v in integ[c].items() if k != "rr_depth"} for c in "RGB"]
+        if any(b != blocks[0] for b in blocks):
+            raise ValueError(f"{meta}: integrator: the channels' passes were rendered with different connections")
+        integ = integ["R"]
     return dataclasses.replace(boundary, max_crossings=int(integ.get("max_crossings", 1)),
                                sms_trials=int(integ.get("sms_trials", 0)),
                                sms_chains=str(integ.get("sms_chains", boundary.sms_chains)))
@@ -80,8 +85,8 @@ def main():
     page = Page("reference_exactness", "Is the reference exact? The verdict on each smooth-dielectric scene")
     page.para(
         "The share of the first-scattered light that `mneevolpath`'s connections miss (`1 - delivered / traced`: "
-        f"`harness/reference/losses.py`, {losses.TRACE_PHOTONS} photons traced through every specular path against "
-        "the connections' power at points inside the mesh, in batches of "
+        f"`harness/reference/losses.py`, photons traced through every specular path in batches of {losses.TRACE_PHOTONS} "
+        f"up to {losses.MAX_TRACE_PHOTONS} against the connections' power at points inside the mesh, in batches of "
         f"{losses.DELIVERED_POINTS} up to {losses.MAX_DELIVERED_POINTS} while undecided), in per cent per channel "
         "R / G / B with its standard error, and the verdict against a quarter of the scene's small-reference noise "
         "target. `committed`: the connections as the committed small reference was rendered (its `reference.json`; "

@@ -457,3 +457,25 @@ class TestReporting:
             print(f"  first scatter: missed {fs['missed_share']} +- {fs['missed_share_se']}, reflections "
                   f"{fs['reflection_share']}")
             assert max(fs["reflection_share"]) < 1e-3, "eta 1.0001 reflects almost nothing"
+
+
+def test_the_exactness_page_reads_the_connections_a_committed_reference_was_rendered_with():
+    """``benchmarks/reference_exactness.py``'s ``committed`` way: a reference rendered as one grey pass per channel
+    keeps one integrator block per channel; the connections are read from them, not taken as one crossing."""
+    import json
+    import sys
+
+    from harness.paths import REPO
+    from harness.scene import load_scene
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from reference_exactness import committed_boundary
+
+    for name in ("skin_torus_dielectric", "jade_backlit_dielectric"):
+        integ = json.loads((REPO / "baselines" / "refs" / name / "reference.json").read_text())["integrator"]
+        block = integ.get("R", integ)
+        got = committed_boundary(name, load_scene(name).boundary)
+        assert (got.max_crossings, got.sms_trials, got.sms_chains) == (
+            block["max_crossings"], block["sms_trials"], block["sms_chains"]), f"{name}: {got}"
+    assert set(json.loads((REPO / "baselines" / "refs" / "skin_torus_dielectric" / "reference.json").read_text())[
+        "integrator"]) == set("RGB"), "the skin torus's reference no longer has one block per channel"

@@ -698,4 +698,10 @@ MUTATIONS = (
              ("tests/test_specular_paths.py::test_tracer_follows_the_camera_transport_where_the_shading_normal_tilts",),
              "the photon tracer bends its photons about the shading normal without the adjoint factor, so it carries "
              "other light than the camera sees where the shading normal tilts"),
+    Mutation("exactness_page_reads_one_block", "metric", "benchmarks/reference_exactness.py",
+             'if set(integ) == set("RGB"):', "if False:",
+             ("tests/test_mnee_chain.py::test_the_exactness_page_reads_the_connections_a_committed_reference_was_"
+              "rendered_with",),
+             "the exactness page reads a per-channel reference's integrator as one block, so it judges the committed "
+             "reference with one crossing and no sampling"),
 ) + RIVALS + FORM
