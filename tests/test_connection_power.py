@@ -24,7 +24,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from .test_mnee import render_stack
+from .test_mnee import area_light_ratio
 from .test_specular_paths import sphere_quadrature, thin_sphere
 
 ms = pytest.importorskip("harness.reference.mitsuba_scene")
@@ -72,15 +72,7 @@ def test_area_light_limit_through_the_hole_matches_the_counted_loss(mi):
     r, md, size = 0.25, 4, 12
     scene = dataclasses.replace(nonconvex.torus_hole(1.4, size=size),
                                 boundary=dataclasses.replace(nonconvex.torus_hole(1.4).boundary, max_crossings=1))
-    light = scene.lights[0]
-    area = ms.area_light_limit(light.position, light.intensity, r, md)
-    full = render_stack(mi, ms.build_scene_dict(scene, **area), range(100, 112), 16384)
-    absorber = render_stack(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), 4096)
-    keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
-    point = render_stack(mi, ms.build_scene_dict(scene, max_depth=md), range(8), 512)
-    f, p = full[:, keep].mean(1), point[:, keep].mean(1)
-    ratio = f.mean(0) / p.mean(0)
-    se = ratio * np.sqrt(f.var(0, ddof=1) / len(f) / f.mean(0) ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
+    ratio, se, keep = area_light_ratio(mi, scene, r, md, range(100, 112), 16384, 4096)
     fs = losses.first_scatter(scene, photons=1 << 14, points=1 << 18)
     predicted = np.asarray(fs["traced"]["direct"]) / np.asarray(fs["delivered"])
     pse = predicted * np.asarray(fs["delivered_se"]) / np.asarray(fs["delivered"])

@@ -49,6 +49,26 @@ def render_stack(mi, scene_dict, seeds, spp):
     return np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
 
 
+def area_light_ratio(mi, scene, radius, max_depth, full_seeds, full_spp, absorber_spp):
+    """``(ratio, se, keep)``: the area-light limit's image (stock ``volpath`` with a sphere light of ``radius``,
+    :func:`harness.reference.mitsuba_scene.area_light_limit`) over the point light's (the scene's integrator at
+    ``max_depth``), per channel over the pixels ``keep`` that show no reflection of the bulb (its pure absorber is
+    black there), with the ratio's standard error over the seeds of both."""
+    from harness.reference import mitsuba_scene as ms
+
+    light = scene.lights[0]
+    area = ms.area_light_limit(light.position, light.intensity, radius, max_depth)
+    full = render_stack(mi, ms.build_scene_dict(scene, **area), full_seeds, full_spp)
+    absorber = render_stack(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202),
+                            absorber_spp)
+    keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
+    point = render_stack(mi, ms.build_scene_dict(scene, max_depth=max_depth), range(8), 512)
+    f, p = full[:, keep].mean(1), point[:, keep].mean(1)
+    ratio = f.mean(0) / p.mean(0)
+    se = ratio * np.sqrt(f.var(0, ddof=1) / len(f) / f.mean(0) ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
+    return ratio, se, keep
+
+
 def z_statistics(z):
     """(fraction of pixels with every channel within 4, max |z|, mean z^2), as the Beer-Lambert test."""
     return float(np.mean(np.all(np.abs(z) <= 4, axis=-1))), float(np.abs(z).max()), float(np.mean(z ** 2))

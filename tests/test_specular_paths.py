@@ -173,19 +173,9 @@ def test_tracer_follows_the_camera_transport_where_the_shading_normal_tilts(mi):
 def test_the_camera_transport_is_the_connections_where_the_shading_normal_tilts(mi):
     """The premise of the factor: stock ``volpath`` from the camera, with a small sphere light, sees the light
     ``mneevolpath``'s point-light connections compute (the area-light limit), not the uncorrected photons' 9 % more."""
-    from .test_mnee import render_stack
+    from .test_mnee import area_light_ratio
 
-    scene = tilted_slab().with_resolution(12, 12)
-    r, md = 0.2, 4
-    light = scene.lights[0]
-    area = ms.area_light_limit(light.position, light.intensity, r, md)
-    full = render_stack(mi, ms.build_scene_dict(scene, **area), range(100, 132), 32768)
-    absorber = render_stack(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), 2048)
-    keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
-    point = render_stack(mi, ms.build_scene_dict(scene, max_depth=md), range(8), 512)
-    f, p = full[:, keep].mean(1), point[:, keep].mean(1)
-    ratio = f.mean(0) / p.mean(0)
-    se = ratio * np.sqrt(f.var(0, ddof=1) / len(f) / f.mean(0) ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
+    ratio, se, keep = area_light_ratio(mi, tilted_slab().with_resolution(12, 12), 0.2, 4, range(100, 132), 32768, 2048)
     print(f"tilted slab, area-light limit: sphere light (volpath) / point light (mneevolpath) {np.round(ratio, 4)} "
           f"+- {np.round(se, 4)}; {int(keep.sum())} pixels")
     assert keep.sum() >= 64, "the bulb's reflection hides most of the slab"

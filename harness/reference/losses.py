@@ -21,7 +21,8 @@ reference's size) and returns, per colour channel:
   lost connections over the image's light;
 * ``first_scatter``: the power that first scatters in the medium, traced from the point lights
   through every specular path (:func:`harness.reference.specular_paths.trace`, an independent
-  route: batches of :data:`TRACE_PHOTONS` photons), by class (``direct``: one refraction; ``chain3``,
+  route: batches of :data:`TRACE_PHOTONS` photons, whose weights take the shading-normal factor so
+  that they carry the camera's transport, as the reference renders it), by class (``direct``: one refraction; ``chain3``,
   ``chain5`` ...: through other parts of the object; ``reflection``: any reflection on the
   way, which only the sampled chains of ``[boundary] sms_trials`` make), against the same power
   as the connections deliver it (:func:`harness.reference.connection_power.delivered`,
