@@ -95,6 +95,13 @@ def shading_normal_correction(d_in, d_out, n, ng):
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
 
 
+def event_letter(was_inside, now_inside):
+    """The letter of a boundary event by the geometric sides before and after it: ``E`` enter, ``T`` leave,
+    ``R`` stay inside, ``r`` stay outside (a refraction about a tilted shading normal that does not cross the
+    geometric surface is labelled as the reflection it acts as)."""
+    return np.where(was_inside, np.where(now_inside, "R", "T"), np.where(now_inside, "E", "r")).astype(object)
+
+
 def path_class(label):
     """``direct``, ``chain<k>`` or ``reflection`` for an event string (module docstring)."""
     if "R" in label or "r" in label:
@@ -199,8 +206,8 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
             if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
                 break
             valid, t, p, n, ng = cast(o, d)
-            # A ray "inside" that meets no surface slipped through at a grazing hit (the shading normal
-            # refracts it to the geometric surface's other side): dropped, its weight reported as leaked.
+            # A ray "inside" that meets no surface slipped through the mesh (a crack between triangles, or an
+            # offset beyond a thin part): dropped, its weight reported as leaked.
             leaked += w[inside & ~valid].sum(0)
             keep = valid
             o, d, w, w0, inside, labels, t, p, n, ng, pid = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, ng,
@@ -229,14 +236,17 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
             mr = wr.max(1) > WEIGHT_CUT * w0
             mt = (F < 1.0) & (wt.max(1) > WEIGHT_CUT * w0)
             cut += wr[~mr].sum(0) + wt[(F < 1.0) & ~mt].sum(0)
-            lab_r = labels + np.where(inside, "R", "r")
-            lab_t = labels + np.where(inside, "T", "E")
-            o = np.concatenate([p[mr] + OFFSET * facing[mr], p[mt] - OFFSET * facing[mt]])
+            # Each branch is in the medium of the geometric normal's side it leaves on (as Mitsuba's
+            # target_medium): a bend about the shading normal that stays on its geometric side stays in its medium.
+            in_r, in_t = np.sum(refl * ng, 1) < 0, np.sum(refr * ng, 1) < 0
+            o = np.concatenate([p[mr] + OFFSET * np.where(in_r[mr, None], -ng[mr], ng[mr]),
+                                p[mt] + OFFSET * np.where(in_t[mt, None], -ng[mt], ng[mt])])
             d = np.concatenate([refl[mr], refr[mt]])
             w = np.concatenate([wr[mr], wt[mt]])
             w0 = np.concatenate([w0[mr], w0[mt]])
-            inside = np.concatenate([inside[mr], ~inside[mt]])
-            labels = np.concatenate([lab_r[mr], lab_t[mt]])
+            labels = np.concatenate([labels[mr] + event_letter(inside[mr], in_r[mr]),
+                                     labels[mt] + event_letter(inside[mt], in_t[mt])])
+            inside = np.concatenate([in_r[mr], in_t[mt]])
             pid = np.concatenate([pid[mr], pid[mt]])
         # The directions are stratified (one per ring of the cone): the variance of the sum by collapsed
         # strata, each pair of neighbouring rings one stratum of two samples (conservative).

@@ -704,4 +704,9 @@ MUTATIONS = (
               "rendered_with",),
              "the exactness page reads a per-channel reference's integrator as one block, so it judges the committed "
              "reference with one crossing and no sampling"),
+    Mutation("tracer_sides_by_the_event", "physics", "harness/reference/specular_paths.py",
+             "in_r, in_t = np.sum(refl * ng, 1) < 0, np.sum(refr * ng, 1) < 0", "in_r, in_t = inside, ~inside",
+             ("tests/test_specular_paths.py::test_no_light_scatters_outside_the_mesh",),
+             "the photon tracer puts a branch inside or outside by the kind of its event, not by the geometric side it "
+             "leaves on, so photons that the shading normal bent to the outside scatter in the air"),
 ) + RIVALS + FORM
