@@ -42,12 +42,13 @@ estimate of the light that the reference loses to specular chains with a reflect
 Limits: point lights only (the scene's lights); the estimate weighs the medium by where light
 first scatters, not by what the camera sees (a share of the light the medium receives, not of
 the image); the object must be the scene's one closed mesh; ``WEIGHT_CUT`` drops
-branches lighter than that fraction (their power is reported as ``cut``). A branch the split
-labels inside that meets no surface (the shading normal sent it across the geometric surface
-at a grazing hit, so it left the closed mesh) is dropped and reported as ``leaked``: it scatters
-nowhere, as in the renderer, where Mitsuba gives a ray the medium of the geometric normal's side
-(``target_medium``). ``leaked`` is therefore not a shortfall of the traced power; it is largest
-on a faceted scan, where grazing hits are common.
+branches lighter than that fraction (their power is reported as ``cut``). Each branch travels in
+the medium of the geometric normal's side it leaves on and starts off the surface along the
+geometric normal, as the renderer's rays do (Mitsuba's ``target_medium``): at a grazing hit on a
+faceted mesh the shading normal may bend a refracted photon back to the outside, or a reflected one
+through the surface, and the event then counts as what it did (:func:`event_letter`), never as
+light scattering in the air (``tests/test_specular_paths.py``, on the scanned bunny). A branch
+inside that meets no surface slipped through the mesh; it is dropped and reported as ``leaked``.
 """
 
 import numpy as np

@@ -705,8 +705,13 @@ MUTATIONS = (
              "the exactness page reads a per-channel reference's integrator as one block, so it judges the committed "
              "reference with one crossing and no sampling"),
     Mutation("tracer_sides_by_the_event", "physics", "harness/reference/specular_paths.py",
-             "in_r, in_t = np.sum(refl * ng, 1) < 0, np.sum(refr * ng, 1) < 0", "in_r, in_t = inside, ~inside",
+             "in_r, in_t = np.sum(refl * ng, 1) < 0, np.sum(refr * ng, 1) < 0\n"
+             "            o = np.concatenate([p[mr] + OFFSET * np.where(in_r[mr, None], -ng[mr], ng[mr]),\n"
+             "                                p[mt] + OFFSET * np.where(in_t[mt, None], -ng[mt], ng[mt])])",
+             "in_r, in_t = inside, ~inside\n"
+             "            o = np.concatenate([p[mr] + OFFSET * facing[mr], p[mt] - OFFSET * facing[mt]])",
              ("tests/test_specular_paths.py::test_no_light_scatters_outside_the_mesh",),
-             "the photon tracer puts a branch inside or outside by the kind of its event, not by the geometric side it "
-             "leaves on, so photons that the shading normal bent to the outside scatter in the air"),
+             "the photon tracer puts a branch inside or outside by the kind of its event and starts it off the surface along "
+             "the shading normal, not by the geometric side it leaves on, so photons that the shading normal bent to "
+             "the outside scatter in the air"),
 ) + RIVALS + FORM
