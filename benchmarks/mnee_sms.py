@@ -33,6 +33,15 @@ def label_of(kinds):
     return "".join(reversed([("E" if inside else "T") if k == "T" else k for k, inside in zip(kinds, sides(kinds))]))
 
 
+def label_groups(chains):
+    """``{label: {"straight": [part], "sampled": [part]}}``: the parts of :func:`connection_power.connection_values`
+    that deliver each photon label (single refraction, straight-seeded chains, then one per sampled chain)."""
+    groups = {"E": {"straight": [0], "sampled": []}, "ETE": {"straight": [1], "sampled": []}}
+    for i, kinds in enumerate(chains):
+        groups.setdefault(label_of(kinds), {"straight": [], "sampled": []})["sampled"].append(2 + i)
+    return groups
+
+
 def rgb(a, digits=3):
     return " / ".join(f"{v:.{digits}f}" for v in np.ravel(a))
 
@@ -81,10 +90,7 @@ def main():
             runs[m] = connection_power.delivered(scene, points=args.points, parts=True,
                                                  integrator={"sms_trials": m, "sms_chains": args.chains})[:2]
             runs[m] += (time.perf_counter() - t0,)
-        # parts: single refraction, straight-seeded chains, then one per sampled chain
-        groups = {"E": {"straight": [0], "sampled": []}, "ETE": {"straight": [1], "sampled": []}}
-        for i, kinds in enumerate(chains):
-            groups.setdefault(label_of(kinds), {"straight": [], "sampled": []})["sampled"].append(2 + i)
+        groups = label_groups(chains)
         rows = []
         for lab, g in groups.items():
             traced = by.get(lab, np.zeros(3)) + (by.get("ETETE", np.zeros(3)) if lab == "ETE" else 0.0)

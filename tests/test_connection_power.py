@@ -81,3 +81,36 @@ def test_area_light_limit_through_the_hole_matches_the_counted_loss(mi):
           f"counted: traced direct / delivered {np.round(predicted, 4)} +- {np.round(pse, 4)}; "
           f"{int((~keep).sum())} pixels left out")
     assert np.all(np.abs(ratio - predicted) <= tol), f"{ratio} against {predicted} (tolerance {tol})"
+
+
+def test_the_points_are_the_delivered_power_and_the_spread_page_reads_their_tail(mi):
+    """``point_values`` is what ``delivered`` averages (same points, same seed), and ``benchmarks/mnee_sms_spread.py``'s
+    two figures against their definitions on synthetic points: the top share of a flat sample is its share of the
+    points, one point holding as much as the rest holds half; the runs' spread is the standard error of their means."""
+    import sys
+
+    from harness.paths import REPO
+    from harness.reference import connection_power
+
+    scene = thin_sphere(sigma_t=(2.0, 3.0, 4.0))
+    f, share = connection_power.point_values(scene, points=4096, seed=3)
+    power, se, share2 = connection_power.delivered(scene, points=4096, seed=3)
+    assert share == share2
+    np.testing.assert_allclose(f.sum(0).mean(0), power, rtol=1e-12)
+    np.testing.assert_allclose(f.sum(0).std(0, ddof=1) / np.sqrt(4096), se, rtol=1e-12)
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from mnee_sms_spread import TOP, spread, top_share
+
+    n = 200_000
+    flat = np.ones((n, 3))
+    np.testing.assert_allclose(top_share(flat), round(TOP * n) / n)
+    spike = flat.copy()
+    spike[7] = [n - 1.0, 0.0, 2 * (n - 1.0)]
+    k = round(TOP * n)                  # the spike and k - 1 ones; in green (no spike there) k ones of n - 1
+    np.testing.assert_allclose(top_share(spike), [(n - 1 + k - 1) / (2 * (n - 1)), k / (n - 1),
+                                                  (2 * (n - 1) + k - 1) / (3 * (n - 1))])
+    rng = np.random.default_rng(0)
+    means = rng.normal(1.0, 0.1, (4000, 3))
+    mean, se = spread(means)
+    assert np.all(np.abs(mean - 1.0) < 0.01) and np.all(np.abs(se * np.sqrt(4000) / 0.1 - 1) < 0.05)

@@ -24,7 +24,11 @@ or beyond ``max_crossings``, specular chains with a reflection vertex) as a shor
 error in the connection's value (geometry term, Fresnel, transmittance) as a difference of
 either sign. Limits: point lights only; it weighs the medium by first scattering, not by
 what the camera sees; the standard error is that of ``points`` points uniform inside the mesh
-(held against the spread over seeds by ``tests/test_connection_power.py``).
+(held against the spread over seeds by ``tests/test_connection_power.py``, without specular manifold sampling).
+With sampling the estimate at a point is ``f(X) N``, heavy-tailed where a solution's seeds rarely converge: a
+few points carry much of a sampled chain's light, and a run that draws none of them is low with a small
+standard error (independent runs against their own errors, and the top points' share:
+``docs/benchmarks/mnee_sms_spread.md``).
 """
 
 import numpy as np
@@ -113,6 +117,21 @@ def connection_values(scene, x, inside=None, seed=0, variant="llvm_ad_rgb", inte
     return [np.stack([np.asarray(v[i], np.float64) for i in range(3)], 1) for v in parts], inside
 
 
+def point_values(scene, points=1 << 18, seed=0, variant="llvm_ad_rgb", integrator=None):
+    """``(f, share)``: ``f`` (parts, points, 3), each point's estimate ``|V| sigma_s phi`` of the first-scattered
+    power, part by part in the order of :func:`connection_values`, at ``points`` points uniform inside the mesh
+    (:func:`inside_points`, drawn with ``seed``); ``share`` the share of the medium's box inside it. The mean
+    over points is :func:`delivered`'s power; the points themselves show how heavy its tail is
+    (``benchmarks/mnee_sms_spread.py``)."""
+    from harness.reference.specular_paths import _grid_lookup
+
+    loaded = _load(scene, variant, integrator)
+    x, volume, share = inside_points(scene, points, np.random.default_rng(seed), loaded)
+    values, _ = connection_values(scene, x, inside=np.ones(len(x), bool), seed=seed, loaded=loaded)
+    st, al = _grid_lookup(scene.medium, x)
+    return volume * np.stack([st * al * phi for phi in values]), share
+
+
 def delivered(scene, points=1 << 18, seed=0, variant="llvm_ad_rgb", integrator=None, parts=False):
     """``(power, se, inside_share)``: first-scattered power (3,) delivered by ``mneevolpath``'s connections.
 
@@ -122,12 +141,8 @@ def delivered(scene, points=1 << 18, seed=0, variant="llvm_ad_rgb", integrator=N
     ``integrator``: as in :func:`connection_values`. ``parts=True`` returns ``power`` and ``se`` per
     part instead, (parts, 3) in the order of :func:`connection_values`.
     """
-    from harness.reference.specular_paths import _grid_lookup
-
-    loaded = _load(scene, variant, integrator)
-    x, volume, share = inside_points(scene, points, np.random.default_rng(seed), loaded)
-    values, _ = connection_values(scene, x, inside=np.ones(len(x), bool), seed=seed, loaded=loaded)
-    st, al = _grid_lookup(scene.medium, x)
-    f = volume * np.stack([st * al * phi for phi in (values if parts else [sum(values)])])
+    f, share = point_values(scene, points, seed, variant, integrator)
+    if not parts:
+        f = f.sum(0, keepdims=True)
     power, se = f.mean(1), f.std(1, ddof=1) / np.sqrt(points)
     return (power, se, share) if parts else (power[0], se[0], share)

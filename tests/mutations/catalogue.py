@@ -714,4 +714,9 @@ MUTATIONS = (
              "the photon tracer puts a branch inside or outside by the kind of its event and starts it off the surface along "
              "the shading normal, not by the geometric side it leaves on, so photons that the shading normal bent to "
              "the outside scatter in the air"),
+    Mutation("spread_page_tail_of_the_lightest", "metric", "benchmarks/mnee_sms_spread.py",
+             "top = -np.sort(-f, axis=0)[:k].sum(0)", "top = np.sort(f, axis=0)[:k].sum(0)",
+             ("tests/test_connection_power.py::test_the_points_are_the_delivered_power_and_the_spread_page_reads_their_"
+              "tail",),
+             "the spread page's tail column sums the lightest points, not the heaviest, so a heavy tail reads as none"),
 ) + RIVALS + FORM
