@@ -46,7 +46,10 @@ its hole the image's shortfall in the area-light limit is 0.03-0.08 larger than 
 predicts, about 2 SE per channel: ``docs/benchmarks/mnee_chains.md``); it covers point lights
 only. Its standard error holds both routes' noise: the delivered power's over points drawn inside
 the mesh, and the traced total's over the photons' stratified directions (each checked against the
-spread over seeds: ``tests/test_connection_power.py``, ``tests/test_specular_paths.py``). A loss
+spread over seeds: ``tests/test_connection_power.py``, ``tests/test_specular_paths.py``); with specular
+manifold sampling the delivered power is heavy-tailed (a few points carry much of a sampled chain's light,
+``docs/benchmarks/mnee_sms_spread.md``), so a batch that draws none of them reads a larger loss with a
+small standard error, one that draws one a smaller loss with a larger standard error. A loss
 within :data:`DECIDED_SE` standard errors of the limit after :data:`MAX_DELIVERED_POINTS` points is
 "undecided" and judged not exact.
 """
