@@ -148,9 +148,9 @@ SCENE_CASES = [
      "boundary.max_crossings", "must be an integer in [1, 9], got 10"),
     # specular manifold sampling of the exact reference
     ("sms-trials-negative", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nsms_trials = -1"),
-     "boundary.sms_trials", "must be an integer in [0, 1024], got -1"),
+     "boundary.sms_trials", "must be an integer in [0, 4096], got -1"),
     ("sms-trials-above-limit", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + "\nsms_trials = 5000"),
-     "boundary.sms_trials", "[0, 1024]"),
+     "boundary.sms_trials", "[0, 4096]"),
     ("sms-chain-ends-inside", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + '\nsms_chains = "T,TT"'),
      "boundary.sms_chains", "'TT' ends inside the medium"),
     ("sms-chain-reflects-outside-first", GOOD.replace(INDEX_MATCHED, SMOOTH.format(eta=1.4) + '\nsms_chains = "rT"'),

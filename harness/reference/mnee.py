@@ -37,7 +37,7 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - |int|
      - Specular manifold sampling (:mod:`harness.reference.mnee_sms`, Zeltner et al. 2020) of the
        connections the straight seed misses: the most Bernoulli trials that weigh one sampled
-       solution (0: off), 0 to 1024. ``[boundary] sms_trials`` of a scene sets it. Default: 0
+       solution (0: off), 0 to 4096. ``[boundary] sms_trials`` of a scene sets it. Default: 0
    * - sms_chains
      - |string|
      - With ``sms_trials``: the chains sampled, from the medium vertex: ``T`` a refraction, ``R``

@@ -89,7 +89,7 @@ MAX_CROSSINGS_LIMIT = 9
 #: ``[boundary] sms_trials`` and ``sms_chains``: specular manifold sampling of the connections a straight
 #: seed misses (:mod:`harness.reference.mnee_sms`): the cap on the Bernoulli trials of one solution's
 #: weight (0: off), its limit, and the chains sampled by default.
-SMS_TRIALS_LIMIT = 1024
+SMS_TRIALS_LIMIT = 4096
 SMS_CHAINS_DEFAULT = "T,RT,Tr,TTT"
 
 #: Relative index of refraction (inside / outside) a dielectric boundary may have: above 1
@@ -153,7 +153,9 @@ class DielectricBoundary(InputModel):
     sms_trials: Annotated[int, Field(ge=0, le=SMS_TRIALS_LIMIT)] = Field(
         0, description="smooth interface: specular manifold sampling of the connections the straight seed misses "
         "(further solutions of a refraction, chains with a reflection at the boundary): the most Bernoulli trials "
-        f"that weigh one solution, 0 (off) to {SMS_TRIALS_LIMIT}; 256 or more keeps the cap's bias small",
+        f"that weigh one solution, 0 (off) to {SMS_TRIALS_LIMIT}; the cap darkens the chains whose solutions few "
+        "seeds reach (light reflected off one part of the object into a thin other part, Tr), so raise it until "
+        "the exactness verdict stops changing",
         examples=[256])
     sms_chains: str = Field(
         SMS_CHAINS_DEFAULT, description="with sms_trials: the chains sampled, from the medium vertex to the light, "
