@@ -35,9 +35,8 @@ Caustics and Glints", SIGGRAPH 2020, Sec. 4-5):
 Measured against the photon tracer, label by label, by ``benchmarks/mnee_sms.py``
 (``docs/benchmarks/mnee_sms.md``: the torus lit through its hole, and the scanned bunny, whose light
 reflected off its body into its ears is the chain ``Tr``; independent runs on the bunny, and the share of a
-sampled chain's light that its heaviest points carry, ``docs/benchmarks/mnee_sms_spread.md``: the cap leaves
-light out of ``T``, ``RT`` and ``Tr`` alike); against the mirror point in a slab
-(``R T``) and the mirrored light under a second part (``T r``) by ``tests/test_mnee_sms.py``.
+sampled chain's light that its heaviest points carry, ``docs/benchmarks/mnee_sms_spread.md``); against the
+mirror point in a slab (``R T``) and the mirrored light under a second part (``T r``) by ``tests/test_mnee_sms.py``.
 
 For the single refraction the solution the straight seed leads to is already connected
 (:mod:`harness.reference.mnee`), so a random walk that ends there contributes nothing (``exclude``):
