@@ -64,7 +64,12 @@ def main():
     ap.add_argument("--write", action="store_true", help="write docs/benchmarks/mnee_sms.md")
     args = ap.parse_args()
     ms.use_variant("llvm_ad_rgb")
-    chains = [tuple(w.strip()) for w in args.chains.split(",") if w.strip()]
+    from harness.reference.mnee_sms import parse_chains
+
+    try:
+        chains = parse_chains(args.chains)
+    except ValueError as exc:
+        ap.error(f"--chains: {exc}")
     page = Page("mnee_sms", "Specular manifold sampling against the photon tracer, chain by chain")
     page.para(
         "First-scattered power by the label of its specular path from the light, as shares of all the traced "

@@ -60,6 +60,8 @@ def main():
     if args.seeds < 2:
         ap.error("--seeds: at least 2 runs are needed for a spread")
     ms.use_variant("llvm_ad_rgb")
+    from harness.reference.mnee_sms import parse_chains
+
     page = Page("mnee_sms_spread", "One delivery of the connections' light: independent runs, spread and tail")
     page.para(
         f"First-scattered power by photon label as shares of all the traced power ({args.photons} photons, "
@@ -72,7 +74,10 @@ def main():
     for name in args.scenes:
         scene = scene_named(name)
         chains_text = args.chains or scene.boundary.sms_chains
-        chains = [tuple(w.strip()) for w in chains_text.split(",") if w.strip()]
+        try:
+            chains = parse_chains(chains_text)
+        except ValueError as exc:
+            ap.error(f"--chains: {exc}")
         integ = {"sms_trials": args.trials, "sms_chains": chains_text}
         t0 = time.perf_counter()
         by = specular_paths.trace(scene, photons=args.photons, seed=11)["by_label"]
