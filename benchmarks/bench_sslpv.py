@@ -1,7 +1,10 @@
 """Per-stage GPU times of the GL SSLPV renderer next to the NumPy twin and the paper's Table 1;
 ``--against REV``: one propagation step of this checkout against ``propagate.comp`` at another commit.
 
-Run: ``.venv/bin/python benchmarks/bench_sslpv.py [--scene jade_veins] [--repeat 3] [--write]``
+Run: ``.venv/bin/python benchmarks/bench_sslpv.py [--scene jade_veins] [--repeat 3] [--gpu] [--write]``
+
+``--gpu`` refuses a software renderer (llvmpipe, softpipe, SwiftShader) in one line, exit 2, and names the page
+``bench_sslpv_gpu``: the stage times that can stand beside the paper's GTX 580.
 
 * GL stage times come from GL timer queries (``GL_TIME_ELAPSED``), median of
   ``--repeat`` renders at 256x256 after one warm-up render (shader JIT).
@@ -51,6 +54,8 @@ PAPER = {  # Table 1, heterogeneous timings (ms), GTX 580, 1 light
                "shading": "1.38 (2 lights)"},
 }
 STAGES = ("rsm", "injection", "propagation", "shading")
+#: GL_RENDERER substrings of the software rasterisers that ``--gpu`` refuses.
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swiftshader", "software")
 
 
 REPO = Path(__file__).resolve().parents[1]
@@ -107,6 +112,7 @@ def main(argv=None):
     ap.add_argument("--scene", default="jade_veins")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--gpu", action="store_true", help="refuse a software renderer; page bench_sslpv_gpu")
     ap.add_argument("--against", help="time propagate.comp against this commit's instead of the stages")
     ap.add_argument("--N", default="64,128", help="--against: grid resolutions")
     ap.add_argument("--steps", type=int, default=8, help="--against: steps per timed run")
@@ -123,6 +129,10 @@ def main(argv=None):
     t0 = time.perf_counter()
     r = SSLPVRenderer()
     t_ctx = time.perf_counter() - t0
+    if args.gpu and any(s in r.gl_renderer.lower() for s in SOFTWARE_RENDERERS):
+        print(f"error: --gpu: GL_RENDERER: {r.gl_renderer!r} is a software renderer; run where EGL finds a GPU, "
+              "or leave out --gpu", file=sys.stderr)
+        return 2
     scene = load_scene(args.scene).with_resolution(args.size, args.size)
     print(f"GL renderer: {r.gl_renderer}   context {t_ctx * 1e3:.0f} ms   scene {scene.name} "
           f"{args.size}x{args.size}, {len(scene.lights)} light(s)")
@@ -199,5 +209,7 @@ def against(args):
 if __name__ == "__main__":
     from page import run
 
-    raise SystemExit(run(main, lambda argv: "bench_sslpv_against" if "--against" in argv else "bench_sslpv",
-                         "SSLPV's stage times on this machine's OpenGL"))
+    raise SystemExit(run(main, lambda argv: ("bench_sslpv_against" if "--against" in argv else
+                                             "bench_sslpv_gpu" if "--gpu" in argv else "bench_sslpv"),
+                         lambda argv: ("SSLPV's stage times on a GPU's OpenGL" if "--gpu" in argv and
+                                       "--against" not in argv else "SSLPV's stage times on this machine's OpenGL")))

@@ -19,7 +19,7 @@ The header states what a reader needs to judge the figures (:func:`header`):
 * the commit, and ``(with uncommitted changes)`` when the tree differed from it outside
   ``docs/`` (a page's own output is not a change); a committed page must not say so
   (``tests/test_benchmark_pages.py``): commit the code, then run the benchmark;
-* the UTC date, the machine (cores, CPU model), the load average when the page was begun and
+* the UTC date, the machine (cores, CPU model, and the GPU where ``nvidia-smi`` names one), the load average when the page was begun and
   when it was written (a timing taken beside other work is visibly so), and the GL renderer
   when the benchmark set :attr:`Page.gl_renderer`.
 
@@ -76,10 +76,31 @@ def _git(*args):
     return out.stdout.strip() if out.returncode == 0 else ""
 
 
+#: A copy of the tree without its ``.git`` (a machine the checkout is sent to) names the commit it was copied
+#: from here: ``<commit>`` after its caller checked every tracked file's blob hash against that commit's.
+COPIED_COMMIT = "HARNESS_COPIED_COMMIT"
+
+
 def commit_state():
-    """``(short commit, dirty)``: dirty when a tracked or new file outside ``docs/`` differs from HEAD."""
+    """``(short commit, dirty)``: dirty when a tracked or new file outside ``docs/`` differs from HEAD.
+
+    Outside a git checkout, the commit named by :data:`COPIED_COMMIT` (clean, as its caller checked), else
+    ``unknown``."""
+    head = _git("rev-parse", "--short=10", "HEAD")
+    if not head:
+        return (os.environ.get(COPIED_COMMIT) or "unknown")[:10], False
     changes = _git("status", "--porcelain", "--untracked-files=normal", "--", ".", ":!docs")
-    return _git("rev-parse", "--short=10", "HEAD") or "unknown", bool(changes)
+    return head, bool(changes)
+
+
+def _gpu():
+    """The GPUs ``nvidia-smi`` names (", "-joined), or "" where there is none."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                             text=True, check=False, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return ", ".join(s.strip() for s in out.stdout.splitlines() if s.strip()) if out.returncode == 0 else ""
 
 
 def _cpu_model():
@@ -182,7 +203,8 @@ class Page:
     def text(self):
         commit, dirty = commit_state()
         now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-        machine = f"{os.cpu_count()} cores ({_cpu_model()})"
+        gpu = _gpu()
+        machine = f"{os.cpu_count()} cores ({_cpu_model()})" + (f", GPU {gpu}" if gpu else "")
         gl = f"; OpenGL: {self.gl_renderer}" if self.gl_renderer else ""
         head = [MARK, f"# {self.title}", "",
                 f"Written by `{self.command}` at commit `{commit}`{' (with uncommitted changes)' if dirty else ''} "
