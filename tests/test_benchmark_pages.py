@@ -110,6 +110,21 @@ def test_uncommitted_changes_outside_docs_are_stated(monkeypatch):
     assert page.commit_state() == ("abc1234567", False) and "uncommitted" not in p.text()
 
 
+def test_a_copied_tree_names_its_commit_only_through_the_variable(monkeypatch):
+    """Outside a git checkout (a copy of the tree sent to another machine) the commit is HARNESS_COPIED_COMMIT's,
+    "unknown" without it; inside one the variable is ignored. The GPU's name joins the machine where nvidia-smi
+    names one."""
+    monkeypatch.setattr(page, "_git", lambda *a: "")
+    monkeypatch.delenv(page.COPIED_COMMIT, raising=False)
+    assert page.commit_state() == ("unknown", False)
+    monkeypatch.setenv(page.COPIED_COMMIT, "0123456789abcdef")
+    assert page.commit_state() == ("0123456789", False)
+    monkeypatch.setattr(page, "_git", lambda *a: "" if a[0] == "status" else "abc1234567")
+    assert page.commit_state() == ("abc1234567", False)
+    monkeypatch.setattr(page, "_gpu", lambda: "NVIDIA H200")
+    assert ", GPU NVIDIA H200," in page.Page("toy", "Toy", argv=["benchmarks/toy.py"], echo=False).text()
+
+
 def _toy(status, printed="| a |\n|---|\n| 1.5 |"):
     def main():
         print(printed)

@@ -26,6 +26,8 @@ from dipole_gl.check_cubemap import check_cubemap
 from dipole_gl.cubemap_geometry import cube_faces
 from dipole_gl.medium import scene_material
 from dipole_gl.params import DipoleParams
+from tests.raster_precision import (containing_face, face_normals, interpolated_normals, plane_hits, split_offset,
+                                    subpixel_bound)
 from tests.test_dipole_gl import RTOL, close
 
 pytestmark = pytest.mark.gl
@@ -78,6 +80,23 @@ def _twin_combine(scene, raw, params):
     return g, out
 
 
+def _on_its_texel(renderer, mesh, gl_pos, gl_nrm, hit, next_rays, size, what):
+    """GL texels against their centres' hits: on the hit triangle's plane (float32), within sub-pixel precision of
+    the hit in it, and with the mesh's normal at the texel's own position (``tests/raster_precision.py``).
+    ``next_rays``: ``((origins, dirs), (origins, dirs))`` through the next texel centres along the texel axes."""
+    face = containing_face(mesh, hit)
+    n = face_normals(mesh, face)
+    (o_r, d_r), (o_u, d_u) = next_rays
+    off_plane, texels = split_offset(gl_pos, hit, n, plane_hits(o_r, d_r, hit, n), plane_hits(o_u, d_u, hit, n))
+    bound = subpixel_bound(renderer.ctx)
+    err_n = np.abs(gl_nrm - interpolated_normals(mesh, face, gl_pos)).max()
+    print(f"{what}: {off_plane.max() / size.max():.2e} of the mesh size off the plane, {texels.max():.2e} texels "
+          f"from the hit (bound {bound:.2e}), normal {err_n:.2e}")
+    assert off_plane.max() <= 1e-4 * size.max(), f"{what}: position off the mesh"
+    assert texels.max() <= bound, f"{what}: position {texels.max():.2e} texels from its centre's hit"
+    assert err_n <= 1e-3, f"{what}: normal"
+
+
 def test_raster_passes_match_a_ray_caster(renderer):
     """Light buffer (perspective from the light) and the six faces (orthographic, with z_tex): the first hit of
     each texel centre's ray; coverage may differ only on texels whose centre lies on a triangle's edge."""
@@ -101,8 +120,14 @@ def test_raster_passes_match_a_ray_caster(renderer):
     assert both.sum() > 100
     print(f"light buffer: {both.sum()} texels covered by both, {np.sum(hit != (gl[:, 3] > 0.5))} differ")
     assert np.sum(hit != (gl[:, 3] > 0.5)) <= 0.02 * both.sum()
-    assert np.abs(gl[both, :3] - pos[both]).max() <= 1e-4 * size.max()
-    assert np.abs(raw["lb_nrm"][:, :S].reshape(-1, 4)[both, :3] - nrm[both]).max() <= 1e-3
+
+    def ray(di, dj):
+        q = np.stack([(i + 0.5 + di) / S * 2 - 1, (j + 0.5 + dj) / S * 2 - 1, np.ones_like(i, float),
+                      np.ones_like(i, float)], -1).reshape(-1, 4)[both] @ np.linalg.inv(views[0].view_proj).T
+        q = q[:, :3] / q[:, 3:] - L
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+    _on_its_texel(renderer, scene.mesh, gl[both, :3], raw["lb_nrm"][:, :S].reshape(-1, 4)[both, :3], pos[both],
+                  ((L, ray(1, 0)), (L, ray(0, 1))), size, "light buffer")
     # faces: orthographic rays from each face's window; z_tex against the ray's distance
     cube, N = raw["cube"], params.cube_size
     j, i = np.mgrid[0:N, 0:N]
@@ -115,8 +140,14 @@ def test_raster_passes_match_a_ray_caster(renderer):
         gn = raw["face_nrm"][:, f * N:(f + 1) * N].reshape(-1, 4)
         both = hit & (gp[:, 3] > 0.5)
         assert np.sum(hit != (gp[:, 3] > 0.5)) <= 0.02 * both.sum() + 1, f"face {f}"
-        assert np.abs(gp[both, :3] - pos[both]).max() <= 1e-4 * size.max(), f"face {f}"
-        z_tex = (2.0 * t[both] - (cube.far + cube.near)) / (cube.far - cube.near) * 0.5 + 0.5
+        step = 2.0 * cube.half / N
+        ob = o[both]
+        dirs = np.broadcast_to(face.dir, ob.shape)
+        _on_its_texel(renderer, scene.mesh, gp[both, :3], gn[both, :3], pos[both],
+                      ((ob + step * face.right, dirs), (ob + step * face.up, dirs)), size, f"face {f}")
+        # window depth: that of the texel's own position along the face's axis (its distance from the eye's plane)
+        t_gl = np.einsum("ij,j->i", gp[both, :3] - face.eye, face.dir)
+        z_tex = (2.0 * t_gl - (cube.far + cube.near)) / (cube.far - cube.near) * 0.5 + 0.5
         assert np.abs(gn[both, 3] - z_tex).max() <= 1e-5, f"face {f}: window depth"
 
 
