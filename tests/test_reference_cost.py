@@ -125,6 +125,30 @@ def test_estimate_keys_and_final_seconds(monkeypatch):
     assert "not rendered" in est["summary"]
 
 
+def test_a_sampling_cap_beyond_the_measured_references_is_called_a_floor():
+    """outside_the_fit reads each measured reference's cap, one block or one per channel; a scene that samples
+    beyond the largest is named, and the estimate's one line says so; none of cost_suite.json's references
+    sampled, so the scanned bunny (cap 4096) is outside it, and a scene without a dielectric says nothing."""
+    import dataclasses
+
+    from harness.scene import load_scene
+
+    per_channel = {"refs": {"a": {"integrator": {c: {"type": "mneevolpath", "sms_trials": 256} for c in "RGB"}},
+                            "b": {"integrator": {"type": "volpath"}}}}
+    bunny = load_scene("validation_scenes/bunny_dielectric")
+    at = lambda n: dataclasses.replace(bunny, boundary=dataclasses.replace(bunny.boundary, sms_trials=n))  # noqa: E731
+    assert cost.outside_the_fit(at(256), per_channel) == []
+    assert cost.outside_the_fit(at(0), per_channel) == []
+    assert cost.outside_the_fit(at(257), per_channel) == [
+        "sms_trials 257 above the measured references' largest (256): the estimate is a floor"]
+    assert "(0): the estimate is a floor" in cost.outside_the_fit(bunny)[0]
+    small = bunny.with_resolution(16, 16)
+    est = cost.estimate_reference(small, 0.04, coverage=np.ones((16, 16)))
+    assert est["outside_the_fit"] and est["summary"].endswith("the estimate is a floor")
+    plain = load_scene("two_lights").with_resolution(16, 16)
+    assert cost.estimate_reference(plain, 0.05, coverage=np.ones((16, 16)))["outside_the_fit"] == []
+
+
 def test_loo_row_is_recomputed_from_the_committed_references():
     """One row of docs/reference_cost.md and cost_model.json's LOO table, recomputed from the measured
     references (harness/reference/cost_suite.json, else baselines/refs) and the family points: the figures

@@ -220,10 +220,10 @@ class ReferencePlan:
         if want is None:
             pilot = _Estimate(self.passes, [self.seed_base + SEED_STRIDE + i for i in range(PILOT_K)])
             self.pilot_est = pilot
-            model = self._cost_model_seconds()
+            model, outside = self._cost_model_seconds()
             self.progress.log((f"the cost model predicts {format_duration(model)} for the final render, before "
                                "rendering" if model else "the cost model cannot predict this scene") +
-                              "; the pilot corrects it after its first round")
+                              "".join(f" ({o})" for o in outside) + "; the pilot corrects it after its first round")
             self.progress.log(f"pilot: {PILOT_K} seeds x {PILOT_SPP} spp in two rounds ({PILOT_EARLY_SPP}, then "
                               f"{PILOT_SPP - PILOT_EARLY_SPP}; {len(self.passes)} pass"
                               f"{'es' if len(self.passes) > 1 else ''}, {self.executor})")
@@ -320,16 +320,22 @@ class ReferencePlan:
 
     def _cost_model_seconds(self):
         """What the cost model (``reference --estimate``, :func:`harness.reference.cost.estimate_reference`)
-        predicts, before any rendering, for the final render's samples on the cores at hand; None where it
-        cannot predict (the pilot's prediction is compared with it in the log)."""
+        predicts, before any rendering, for the final render's samples on the cores at hand (None where it
+        cannot predict; the pilot's prediction is compared with it in the log), and what of the render lies
+        outside the model's measurements (:func:`harness.reference.cost.outside_the_fit`; with another
+        Mitsuba variant than the measured ``llvm_ad_rgb``, that too)."""
         from harness.reference.cost import estimate_reference
 
         try:
             est = estimate_reference(self.scene, self.target, workers=None if self.executor == "serial" else
                                      self.slots, coverage=self.coverage)
         except (ValueError, KeyError, OSError, InputError):
-            return None
-        return float(est["predicted_spp_total"] * est["seconds_per_spp"])
+            return None, []
+        variant = self.setup.variant
+        outside = list(est.get("outside_the_fit", []))
+        if variant and variant != "llvm_ad_rgb":
+            outside.append(f"measured with llvm_ad_rgb on CPU cores, rendered with {variant}")
+        return float(est["predicted_spp_total"] * est["seconds_per_spp"]), outside
 
     def _pilot_predict(self, pilot, spp):
         """``(noise, spp per final seed, cap)`` predicted from the pilot's ``spp`` samples per seed so far."""

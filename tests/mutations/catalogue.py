@@ -418,6 +418,12 @@ MUTATIONS = (
              'help=f"{SHARED[\'--workers\']}, an integer > 0")',
              ("tests/test_cli_help.py::test_every_default_is_shown",),
              "--workers no longer says what it is when left out, on every command that takes it"),
+    Mutation("cost_range_reads_one_block", "cli", "harness/reference/cost.py",
+             'blocks = integrator.values() if set(integrator) == set("RGB") else [integrator]',
+             "blocks = [integrator]",
+             ("tests/test_reference_cost.py::test_a_sampling_cap_beyond_the_measured_references_is_called_a_floor",),
+             "cost model: the measured references' caps read from the top block only, so a reference rendered in "
+             "one pass per channel counts as never sampled"),
     Mutation("benchmark_page_dirty_tree_unflagged", "cli", "benchmarks/page.py",
              "    return head, bool(changes)",
              "    return head, False",
