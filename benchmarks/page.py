@@ -20,8 +20,8 @@ The header states what a reader needs to judge the figures (:func:`header`):
   ``docs/`` (a page's own output is not a change); a committed page must not say so
   (``tests/test_benchmark_pages.py``): commit the code, then run the benchmark;
 * the UTC date, the machine (cores, CPU model, and the GPU where ``nvidia-smi`` names one), the
-  load average when the page was begun and when it was written (a timing taken beside other work is visibly so), and the GL renderer
-  when the benchmark set :attr:`Page.gl_renderer`.
+  load average when the page was begun and when it was written (a timing taken beside other work
+  is visibly so), and the GL renderer when the benchmark set :attr:`Page.gl_renderer`.
 
 ``python benchmarks/page.py`` rewrites the index ``docs/benchmarks.md`` from the pages' headers
 (:func:`write_index`); :meth:`Page.write` does it too. The index also lists the benchmarks that
