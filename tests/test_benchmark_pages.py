@@ -148,3 +148,23 @@ def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch):
     assert h["command"] == "python benchmarks/toy.py --n 3" and h["title"] == "Toy"
     assert "| 1.5 |" in written.read_text()
     assert "[Toy](benchmarks/toy.md)" in (pages_in / "benchmarks.md").read_text()
+
+
+@pytest.mark.gl
+def test_bench_sslpv_gpu_refuses_a_software_renderer(gl_renderer):
+    """``bench_sslpv.py --gpu`` on a software rasteriser: the error line names the setting and the renderer, exit 2,
+    and no page is written (on a GPU's driver it would run, so the test is skipped there)."""
+    import subprocess
+
+    bench = importlib.util.spec_from_file_location("bench_sslpv", ROOT / "benchmarks" / "bench_sslpv.py")
+    mod = importlib.util.module_from_spec(bench)
+    bench.loader.exec_module(mod)
+    if not any(s in gl_renderer.gl_renderer.lower() for s in mod.SOFTWARE_RENDERERS):
+        pytest.skip(f"a GPU's driver ({gl_renderer.gl_renderer}): --gpu runs the benchmark")
+    before = (ROOT / "docs" / "benchmarks" / "bench_sslpv_gpu.md").read_bytes()
+    out = subprocess.run([sys.executable, "benchmarks/bench_sslpv.py", "--gpu", "--write"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2
+    assert out.stderr.splitlines()[0].startswith("error: --gpu: GL_RENDERER: ")
+    assert "is a software renderer" in out.stderr and out.stdout == ""
+    assert (ROOT / "docs" / "benchmarks" / "bench_sslpv_gpu.md").read_bytes() == before

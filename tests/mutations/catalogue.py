@@ -424,6 +424,12 @@ MUTATIONS = (
              ("tests/test_reference_cost.py::test_a_sampling_cap_beyond_the_measured_references_is_called_a_floor",),
              "cost model: the measured references' caps read from the top block only, so a reference rendered in "
              "one pass per channel counts as never sampled"),
+    Mutation("bench_gpu_accepts_software", "cli", "benchmarks/bench_sslpv.py",
+             "if args.gpu and any(s in r.gl_renderer.lower() for s in SOFTWARE_RENDERERS):",
+             "if args.gpu and any(s in r.gl_renderer.lower() for s in SOFTWARE_RENDERERS[1:]):",
+             ("tests/test_benchmark_pages.py::test_bench_sslpv_gpu_refuses_a_software_renderer",),
+             "bench_sslpv --gpu: llvmpipe taken for a GPU, so a software renderer's stage times would be written as "
+             "a GPU's page"),
     Mutation("benchmark_page_dirty_tree_unflagged", "cli", "benchmarks/page.py",
              "    return head, bool(changes)",
              "    return head, False",
