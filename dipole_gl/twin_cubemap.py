@@ -60,8 +60,9 @@ def light_axis(light_pos, centre):
     return a / np.linalg.norm(a)
 
 
-def raycast(mesh, origins, dirs, pairs=2_000_000):
-    """First hit of each ray on ``mesh`` -> ``(position (R, 3), normal (R, 3), hit (R,), t (R,))``.
+def raycast(mesh, origins, dirs, pairs=2_000_000, faces=False):
+    """First hit of each ray on ``mesh`` -> ``(position (R, 3), normal (R, 3), hit (R,), t (R,))``, and with
+    ``faces`` the index of the hit triangle (R,) (-1 where the ray misses) after them.
 
     ``dirs`` unit; the normal interpolates the vertex normals barycentrically and is normalised
     (as ``cubemap_face.frag`` and ``rsm.frag`` do); back faces count (the rasteriser draws both).
@@ -102,7 +103,8 @@ def raycast(mesh, origins, dirs, pairs=2_000_000):
     ft = f[np.maximum(tri, 0)]
     n = (1 - bu - bv)[:, None] * nv[ft[:, 0]] + bu[:, None] * nv[ft[:, 1]] + bv[:, None] * nv[ft[:, 2]]
     n = np.where(hit[:, None], n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), 0.0)
-    return pos, n, hit, np.where(hit, best, np.inf)
+    out = (pos, n, hit, np.where(hit, best, np.inf))
+    return out + (tri,) if faces else out
 
 
 def _edge(x, tol):

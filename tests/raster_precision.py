@@ -3,12 +3,13 @@
 A G-buffer texel (an RSM's or a cube face's position and normal) interpolates the triangle's vertex
 attributes at the barycentric coordinates of the texel's centre. OpenGL keeps window coordinates to
 ``GL_SUBPIXEL_BITS`` bits of sub-pixel precision (an implementation-dependent value, at least 4), so the
-rasteriser may compute those from vertices snapped to that grid. Snapping to the nearest grid point moves each vertex by at most half a grid step
-along each axis, so the barycentrics are those of a point at most ``sqrt(2) / 2 * 2**-bits`` pixels from
-the centre on the unsnapped triangle; with truncation instead of rounding, ``sqrt(2) * 2**-bits``, the
-bound used here (:func:`subpixel_bound`). The interpolated position lies on the triangle's plane, that
-far from the centre's hit measured through the texel's footprint on the plane; the interpolated normal
-is the mesh's normal at that position, not at the hit.
+rasteriser may compute those from vertices snapped to that grid. Snapping to the nearest grid point
+moves each vertex by at most half a grid step along each axis, so the barycentrics are those of a point
+at most ``sqrt(2) / 2 * 2**-bits`` pixels from the centre on the unsnapped triangle; with truncation
+instead of rounding, ``sqrt(2) * 2**-bits``, the bound used here (:func:`subpixel_bound`). The
+interpolated position lies on the triangle's plane, that far from the centre's hit measured through the
+texel's footprint on the plane; the interpolated normal is the mesh's normal at that position, not at
+the hit.
 
 So the checks are, per texel (:func:`split_offset`):
 
@@ -28,7 +29,7 @@ map): in-plane offsets of at most 3.3e-4 texels on llvmpipe and 2.5e-3 on an NVI
 Limits: the footprint is the linearisation at the hit, valid for offsets far below a texel; at grazing
 incidence a texel's footprint is long, so the same texel offset is a longer distance; a texel whose
 centre's ray hits another triangle than the one the rasteriser chose (an edge, a silhouette) is not
-covered: callers pick the hit near the GL position.
+covered: callers pass the hit triangle their ray caster found.
 """
 
 import numpy as np
@@ -66,43 +67,17 @@ def split_offset(pos, hit, normal, right_hit, up_hit):
 
 
 def interpolated_normals(mesh, face, point):
-    """The mesh's vertex normals interpolated at ``point`` (on face ``face``'s plane), normalised."""
+    """The mesh's vertex normals interpolated at ``point`` (on face ``face``'s plane), normalised: barycentrics
+    from the normal equations of ``point - a = v (b - a) + w (c - a)``."""
     tri = np.asarray(mesh.vertices, np.float64)[mesh.faces[face]]
-    bary = _barycentrics(tri, np.asarray(point, np.float64))
-    n = np.einsum("ij,ijk->ik", bary, np.asarray(mesh.normals, np.float64)[mesh.faces[face]])
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
-
-
-def containing_face(mesh, points):
-    """The face each point (a ray's hit) lies on: the nearest plane among the faces whose bounding box, grown
-    by a millionth of the mesh's size, holds the point and whose barycentrics there are all >= -1e-9."""
-    v = np.asarray(mesh.vertices, np.float64)
-    tri = v[mesh.faces]
-    pad = 1e-6 * float(np.ptp(v, axis=0).max())
-    lo, hi = tri.min(axis=1) - pad, tri.max(axis=1) + pad
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    out = np.full(len(points), -1)
-    for k, q in enumerate(np.asarray(points, np.float64)):
-        cand = np.flatnonzero(np.all((q >= lo) & (q <= hi), axis=1))
-        if not len(cand):
-            continue
-        bary = _barycentrics(tri[cand], np.broadcast_to(q, (len(cand), 3)))
-        inside = np.all(bary >= -1e-9, axis=1)
-        dist = np.where(inside, np.abs(np.einsum("ij,ij->i", q - tri[cand, 0], n[cand])), np.inf)
-        if np.isfinite(dist.min()):
-            out[k] = cand[np.argmin(dist)]
-    return out
-
-
-def _barycentrics(tri, point):
-    e1, e2, d = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], point - tri[:, 0]
+    e1, e2, d = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], np.asarray(point, np.float64) - tri[:, 0]
     d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
     p1, p2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
     den = d11 * d22 - d12 * d12
-    v = (d22 * p1 - d12 * p2) / den
-    w = (d11 * p2 - d12 * p1) / den
-    return np.stack([1 - v - w, v, w], axis=1)
+    v, w = (d22 * p1 - d12 * p2) / den, (d11 * p2 - d12 * p1) / den
+    bary = np.stack([1 - v - w, v, w], axis=1)
+    n = np.einsum("ij,ijk->ik", bary, np.asarray(mesh.normals, np.float64)[mesh.faces[face]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def face_normals(mesh, face):

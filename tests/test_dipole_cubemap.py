@@ -26,8 +26,7 @@ from dipole_gl.check_cubemap import check_cubemap
 from dipole_gl.cubemap_geometry import cube_faces
 from dipole_gl.medium import scene_material
 from dipole_gl.params import DipoleParams
-from tests.raster_precision import (containing_face, face_normals, interpolated_normals, plane_hits, split_offset,
-                                    subpixel_bound)
+from tests.raster_precision import face_normals, interpolated_normals, plane_hits, split_offset, subpixel_bound
 from tests.test_dipole_gl import RTOL, close
 
 pytestmark = pytest.mark.gl
@@ -80,11 +79,11 @@ def _twin_combine(scene, raw, params):
     return g, out
 
 
-def _on_its_texel(renderer, mesh, gl_pos, gl_nrm, hit, next_rays, size, what):
+def _on_its_texel(renderer, mesh, gl_pos, gl_nrm, hit, face, next_rays, size, what):
     """GL texels against their centres' hits: on the hit triangle's plane (float32), within sub-pixel precision of
     the hit in it, and with the mesh's normal at the texel's own position (``tests/raster_precision.py``).
-    ``next_rays``: ``((origins, dirs), (origins, dirs))`` through the next texel centres along the texel axes."""
-    face = containing_face(mesh, hit)
+    ``face``: the hit triangles; ``next_rays``: ``((origins, dirs), (origins, dirs))`` through the next texel
+    centres along the texel axes."""
     n = face_normals(mesh, face)
     (o_r, d_r), (o_u, d_u) = next_rays
     off_plane, texels = split_offset(gl_pos, hit, n, plane_hits(o_r, d_r, hit, n), plane_hits(o_u, d_u, hit, n))
@@ -106,36 +105,32 @@ def test_raster_passes_match_a_ray_caster(renderer):
     views = light_views(scene)[0]
     size = scene.mesh.vertices.max(0) - scene.mesh.vertices.min(0)
     S = params.light_size
-    # light buffer: texel centre -> NDC -> a world point on the far plane -> ray from the light
+    # light buffer: texel centre (moved by di, dj texels) -> NDC -> a world point on the far plane -> ray from the light
     j, i = np.mgrid[0:S, 0:S]
-    ndc = np.stack([(i + 0.5) / S * 2 - 1, (j + 0.5) / S * 2 - 1, np.ones_like(i, float), np.ones_like(i, float)], -1)
-    far = ndc.reshape(-1, 4) @ np.linalg.inv(views[0].view_proj).T
-    far = far[:, :3] / far[:, 3:]
     L = np.asarray(scene.lights[0].position, float)
-    d = far - L
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    pos, nrm, hit, _ = twin_cubemap.raycast(scene.mesh, L, d)
+
+    def ray(di=0, dj=0):
+        ndc = np.stack([(i + 0.5 + di) / S * 2 - 1, (j + 0.5 + dj) / S * 2 - 1, np.ones_like(i, float),
+                        np.ones_like(i, float)], -1)
+        far = ndc.reshape(-1, 4) @ np.linalg.inv(views[0].view_proj).T
+        d = far[:, :3] / far[:, 3:] - L
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+    pos, _, hit, _, tri = twin_cubemap.raycast(scene.mesh, L, ray(), faces=True)
     gl = raw["lb_pos"][:, :S].reshape(-1, 4)
     both = hit & (gl[:, 3] > 0.5)
     assert both.sum() > 100
     print(f"light buffer: {both.sum()} texels covered by both, {np.sum(hit != (gl[:, 3] > 0.5))} differ")
     assert np.sum(hit != (gl[:, 3] > 0.5)) <= 0.02 * both.sum()
-
-    def ray(di, dj):
-        q = np.stack([(i + 0.5 + di) / S * 2 - 1, (j + 0.5 + dj) / S * 2 - 1, np.ones_like(i, float),
-                      np.ones_like(i, float)], -1).reshape(-1, 4)[both] @ np.linalg.inv(views[0].view_proj).T
-        q = q[:, :3] / q[:, 3:] - L
-        return q / np.linalg.norm(q, axis=1, keepdims=True)
     _on_its_texel(renderer, scene.mesh, gl[both, :3], raw["lb_nrm"][:, :S].reshape(-1, 4)[both, :3], pos[both],
-                  ((L, ray(1, 0)), (L, ray(0, 1))), size, "light buffer")
-    # faces: orthographic rays from each face's window; z_tex against the ray's distance
+                  tri[both], ((L, ray(1, 0)[both]), (L, ray(0, 1)[both])), size, "light buffer")
+    # faces: orthographic rays from each face's window; z_tex against the depth of the texel's own position
     cube, N = raw["cube"], params.cube_size
     j, i = np.mgrid[0:N, 0:N]
     for f, face in enumerate(cube.faces):
         x = ((i + 0.5) / N * 2 - 1) * cube.half
         y = ((j + 0.5) / N * 2 - 1) * cube.half
         o = face.eye + x.reshape(-1, 1) * face.right + y.reshape(-1, 1) * face.up
-        pos, nrm, hit, t = twin_cubemap.raycast(scene.mesh, o, np.broadcast_to(face.dir, o.shape))
+        pos, _, hit, _, tri = twin_cubemap.raycast(scene.mesh, o, np.broadcast_to(face.dir, o.shape), faces=True)
         gp = raw["face_pos"][:, f * N:(f + 1) * N].reshape(-1, 4)
         gn = raw["face_nrm"][:, f * N:(f + 1) * N].reshape(-1, 4)
         both = hit & (gp[:, 3] > 0.5)
@@ -143,7 +138,7 @@ def test_raster_passes_match_a_ray_caster(renderer):
         step = 2.0 * cube.half / N
         ob = o[both]
         dirs = np.broadcast_to(face.dir, ob.shape)
-        _on_its_texel(renderer, scene.mesh, gp[both, :3], gn[both, :3], pos[both],
+        _on_its_texel(renderer, scene.mesh, gp[both, :3], gn[both, :3], pos[both], tri[both],
                       ((ob + step * face.right, dirs), (ob + step * face.up, dirs)), size, f"face {f}")
         # window depth: that of the texel's own position along the face's axis (its distance from the eye's plane)
         t_gl = np.einsum("ij,j->i", gp[both, :3] - face.eye, face.dir)

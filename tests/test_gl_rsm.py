@@ -110,7 +110,7 @@ def test_injection_rsm_matches_mesh(gl_renderer, name):
         pos = tex[picks, 0:3].astype(np.float64)
         nrm = tex[picks, 3:6].astype(np.float64)
         # valid texels: the hit near the texel's own position; invalid ones: no hit anywhere
-        t, face, bary = intersect(mesh, origin, dirs[on], hint=pos[on], radius=3 * edge)
+        t, face, _ = intersect(mesh, origin, dirs[on], hint=pos[on], radius=3 * edge)
         assert np.all(np.isfinite(t)), f"{name}: {np.sum(~np.isfinite(t))} valid texels whose ray misses the mesh"
         hit = origin + t[:, None] * dirs[on]
         off_plane, texels = _offsets(mesh, face, view, SIZE, rows[on], cols[on], origin, pos[on], hit)
