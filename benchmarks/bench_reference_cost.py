@@ -46,6 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from harness.reference import cost  # noqa: E402
+from harness.reference.mitsuba_scene import integrator_blocks  # noqa: E402
 from harness.scene import load_scene  # noqa: E402
 
 DOC = ROOT / "docs" / "reference_cost.md"
@@ -68,8 +69,7 @@ def todays_choice(scene, summ):
 def ref_entry(meta, summ, cores_model, today=None):
     """A committed reference's row (how it WAS rendered), time points and noise point; ``today``: the
     (passes, rr_depths) today's renderer would choose, to flag references rendered with other choices."""
-    integ = meta["integrator"]
-    per_pass = [integ[c] for c in ("R", "G", "B")] if "R" in integ else [integ]
+    per_pass = integrator_blocks(meta["integrator"])
     row = cost.scene_row(summ, covered=meta["covered_pixels"], passes=len(per_pass),
                          absorber=bool(meta.get("seeds_absorber")), integrator=per_pass[0]["type"],
                          rr_depth=[p["rr_depth"] for p in per_pass], dielectric=meta.get("boundary") != "index-matched")

@@ -52,12 +52,11 @@ def committed_boundary(name, boundary):
     meta = REPO / "baselines" / "refs" / name.split("/")[-1] / "reference.json"
     if not meta.is_file():
         return None
-    integ = json.loads(meta.read_text()).get("integrator", {})
-    if set(integ) == set("RGB"):                # one grey pass per channel: one block each, the same connections
-        blocks = [{k: v for k, v in integ[c].items() if k != "rr_depth"} for c in "RGB"]
-        if any(b != blocks[0] for b in blocks):
-            raise ValueError(f"{meta}: integrator: the channels' passes were rendered with different connections")
-        integ = integ["R"]
+    blocks = ms.integrator_blocks(json.loads(meta.read_text()).get("integrator", {}))
+    connections = [{k: v for k, v in b.items() if k != "rr_depth"} for b in blocks]
+    if any(c != connections[0] for c in connections):   # one grey pass per channel: the same connections in each
+        raise ValueError(f"{meta}: integrator: the channels' passes were rendered with different connections")
+    integ = blocks[0]
     return dataclasses.replace(boundary, max_crossings=int(integ.get("max_crossings", 1)),
                                sms_trials=int(integ.get("sms_trials", 0)),
                                sms_chains=str(integ.get("sms_chains", boundary.sms_chains)))

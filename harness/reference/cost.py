@@ -266,9 +266,10 @@ SUITE_FILE = Path(__file__).with_name("cost_suite.json")
 
 
 def _sms_trials(integrator):
-    """The largest ``sms_trials`` of a reference's integrator block (one block, or one per channel)."""
-    blocks = integrator.values() if set(integrator) == set("RGB") else [integrator]
-    return max(int(b.get("sms_trials", 0) or 0) for b in blocks)
+    """The largest ``sms_trials`` of a reference's integrator notes (one block, or one per channel)."""
+    from harness.reference.mitsuba_scene import integrator_blocks
+
+    return max(int(b.get("sms_trials", 0) or 0) for b in integrator_blocks(integrator))
 
 
 def outside_the_fit(scene, suite=None):

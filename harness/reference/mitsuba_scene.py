@@ -405,6 +405,12 @@ def scene_notes(scene):
     }
 
 
+def integrator_blocks(integrator):
+    """A reference's ``integrator`` notes (:func:`scene_notes`) as a list of blocks: the one block of an RGB pass,
+    or the R, G and B blocks of one grey pass per channel."""
+    return [integrator[c] for c in "RGB"] if set(integrator) == set("RGB") else [integrator]
+
+
 # --------------------------------------------------------------------------- camera rays and mask
 
 def camera_frame(camera):

@@ -419,8 +419,8 @@ MUTATIONS = (
              ("tests/test_cli_help.py::test_every_default_is_shown",),
              "--workers no longer says what it is when left out, on every command that takes it"),
     Mutation("cost_range_reads_one_block", "cli", "harness/reference/cost.py",
-             'blocks = integrator.values() if set(integrator) == set("RGB") else [integrator]',
-             "blocks = [integrator]",
+             'return max(int(b.get("sms_trials", 0) or 0) for b in integrator_blocks(integrator))',
+             'return max(int(b.get("sms_trials", 0) or 0) for b in [integrator])',
              ("tests/test_reference_cost.py::test_a_sampling_cap_beyond_the_measured_references_is_called_a_floor",),
              "cost model: the measured references' caps read from the top block only, so a reference rendered in "
              "one pass per channel counts as never sampled"),
@@ -720,7 +720,8 @@ MUTATIONS = (
              "the photon tracer bends its photons about the shading normal without the adjoint factor, so it carries "
              "other light than the camera sees where the shading normal tilts"),
     Mutation("exactness_page_reads_one_block", "metric", "benchmarks/reference_exactness.py",
-             'if set(integ) == set("RGB"):', "if False:",
+             'blocks = ms.integrator_blocks(json.loads(meta.read_text()).get("integrator", {}))',
+             'blocks = [json.loads(meta.read_text()).get("integrator", {})]',
              ("tests/test_mnee_chain.py::test_the_exactness_page_reads_the_connections_a_committed_reference_was_"
               "rendered_with",),
              "the exactness page reads a per-channel reference's integrator as one block, so it judges the committed "
