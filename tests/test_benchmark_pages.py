@@ -152,15 +152,12 @@ def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch):
 
 @pytest.mark.gl
 def test_bench_sslpv_gpu_refuses_a_software_renderer(gl_renderer):
-    """``bench_sslpv.py --gpu`` on a software rasteriser: the error line names the setting and the renderer, exit 2,
-    and no page is written (on a GPU's driver it would run, so the test is skipped there)."""
+    """``bench_sslpv.py --gpu`` on llvmpipe: the error line names the setting and the renderer, exit 2, and no page
+    is written (on another driver it may run, so the test is skipped there)."""
     import subprocess
 
-    bench = importlib.util.spec_from_file_location("bench_sslpv", ROOT / "benchmarks" / "bench_sslpv.py")
-    mod = importlib.util.module_from_spec(bench)
-    bench.loader.exec_module(mod)
-    if not any(s in gl_renderer.gl_renderer.lower() for s in mod.SOFTWARE_RENDERERS):
-        pytest.skip(f"a GPU's driver ({gl_renderer.gl_renderer}): --gpu runs the benchmark")
+    if "llvmpipe" not in gl_renderer.gl_renderer.lower():    # named here, not read from the benchmark's list
+        pytest.skip(f"not llvmpipe ({gl_renderer.gl_renderer}): --gpu may run the benchmark")
     before = (ROOT / "docs" / "benchmarks" / "bench_sslpv_gpu.md").read_bytes()
     out = subprocess.run([sys.executable, "benchmarks/bench_sslpv.py", "--gpu", "--write"], cwd=ROOT,
                          capture_output=True, text=True, timeout=300)
