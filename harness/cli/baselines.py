@@ -11,7 +11,7 @@ Each action is a sub-command with its own options:
 
 from pathlib import Path
 
-from harness.cli.options import add_cluster, add_json, add_progress, add_scenes, add_store
+from harness.cli.options import add_cluster, add_json, add_progress, add_scenes, add_sms_split, add_store
 
 HELP = "accept, show or regenerate the committed accuracy baselines"
 #: This command's actions are sub-commands (each adds its own ``--json``).
@@ -43,6 +43,7 @@ def configure(sp):
     add_scenes(regen)
     regen.add_argument("--into", type=Path, metavar="DIR", help="write the checked new reference into this folder "
                        "instead of replacing the committed one; needs exactly one scene (default: replace it)")
+    add_sms_split(regen)
     add_cluster(regen, serial=True)
     add_progress(regen)
 

@@ -42,6 +42,7 @@ VOCABULARY = {
     "--date": "the night's date",
     "--method": "the method(s)",
     "--target": "a reference's noise target", "--spp": "samples per pixel", "--variant": "Mitsuba variant",
+    "--sms-split": "the rest's samples per sampled one",
     "--force": "re-render a cached reference", "--max-minutes": "a wall-time cap", "--estimate": "predict only",
     "--mask": "the pixels to compare", "--all-pixels": "every pixel",
     "--budget-ms": "a cost budget",
@@ -148,6 +149,13 @@ def add_progress(sp):
     sp.add_argument("--progress", action=Flag, default=True,
                     help=f"{SHARED['--progress']}: a bar on a terminal, one line per step in a log "
                          "(SSLPV_PROGRESS=bar|lines|off overrides the form; default: --progress)")
+
+
+def add_sms_split(sp):
+    sp.add_argument("--sms-split", dest="sms_split", type=positive_int, metavar="N", help="with specular manifold "
+                    "sampling ([boundary] sms_trials): render the sampled solutions' light in a pass of its own, "
+                    "with one sample for every N of the rest, 1 to 64; 1 renders one pass (default: "
+                    "harness/reference/jobs.py's DEFAULT_SMS_SPLIT where the scene samples)")
 
 
 def add_no_cache(sp):

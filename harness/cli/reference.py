@@ -1,6 +1,7 @@
 """``sslpv-harness reference SCENE``: a scene's Mitsuba ground truth, from the cache or rendered on Dask."""
 
-from harness.cli.options import add_cluster, add_out, add_progress, add_scene, add_size, positive_int
+from harness.cli.options import (add_cluster, add_out, add_progress, add_scene, add_size, add_sms_split,
+                                 positive_int)
 
 HELP = "render (or fetch from the cache) a scene's Mitsuba ground truth"
 
@@ -16,6 +17,7 @@ def configure(sp):
     sp.add_argument("--variant", choices=["llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb"],
                     help="Mitsuba variant: llvm_ad_rgb | cuda_ad_rgb | scalar_rgb (default: llvm_ad_rgb)")
     sp.add_argument("--force", action="store_true", help="re-render even if a cached reference exists")
+    add_sms_split(sp)
     add_size(sp, ("WxH",))
     sp.add_argument("--max-minutes", dest="max_minutes", metavar="M", help="cap on the wall time, minutes > 0; the "
                     "result records the noise it reached, and a sweep refuses a reference that missed its target "
@@ -32,5 +34,6 @@ def run(args):
     result = run_reference_cmd(args.scene, out_dir=args.out, target=args.target, spp=args.spp,
                                variant=args.variant, force=args.force, max_minutes=args.max_minutes,
                                estimate=args.estimate, size=args.size, workers=args.workers,
-                               scheduler=args.scheduler, serial=args.serial, progress=args.progress)
+                               scheduler=args.scheduler, serial=args.serial, progress=args.progress,
+                               sms_split=args.sms_split)
     return result, result.get("summary") if args.estimate else None, 0

@@ -30,6 +30,8 @@ PILOT_K = 4                  # the pilot's seeds ...
 PILOT_SPP = 16               # ... and samples per seed, rendered in two rounds:
 PILOT_EARLY_SPP = 4          # the first, whose prediction corrects the cost model's early, then the rest
 SEED_STRIDE = 1 << 16        # separates the seed ranges of pilot/full/absorber passes
+MAX_SMS_SPLIT = 64           # the most samples of the rest per sample of the sampled solutions' pass
+DEFAULT_SMS_SPLIT = 8        # ... and the split where none is given and the scene samples (bench_sms_split)
 CHUNK_SEEDS = 4096           # Mitsuba seed = seed * CHUNK_SEEDS + chunk index (< 2**32)
 
 
@@ -37,14 +39,18 @@ CHUNK_SEEDS = 4096           # Mitsuba seed = seed * CHUNK_SEEDS + chunk index (
 
 @dataclasses.dataclass(frozen=True)
 class PassSpec:
-    """One Mitsuba scene of a reference: ``full`` or ``absorber`` (albedo 0), RGB or one grey channel."""
+    """One Mitsuba scene of a reference: ``full`` or ``absorber`` (albedo 0), RGB or one grey channel, and with
+    a split specular manifold sampling (:attr:`RenderSetup.sms_split`) one of the full image's two parts:
+    ``rest`` (sampling off) or ``sampled`` (only the sampled solutions' light), whose images add."""
 
     kind: str                  # "full" | "absorber"
     channel: int = None        # None: one RGB pass; c: the grey pass of channel c
+    part: str = None           # None: the whole image; "rest" | "sampled": a part of it
 
     @property
     def name(self):
-        return self.kind if self.channel is None else f"{self.kind}_{'rgb'[self.channel]}"
+        base = self.kind if self.channel is None else f"{self.kind}_{'rgb'[self.channel]}"
+        return base if self.part is None else f"{base}_{self.part}"
 
 
 @dataclasses.dataclass
@@ -55,17 +61,41 @@ class RenderSetup:
     variant: str = None
     threads: int = None        # Dr.Jit threads per render (None: Dr.Jit's default, one per core)
     extra_emitters: dict = None
+    #: With specular manifold sampling (``[boundary] sms_trials``): render the sampled solutions' light as a
+    #: pass of its own with one sample for every ``sms_split`` of the rest (1: one pass, no split; None:
+    #: :data:`DEFAULT_SMS_SPLIT` where the scene samples). Their light is a few per cent of the image and much
+    #: of its cost (``docs/benchmarks/bench_sms_split.md``).
+    sms_split: int = None
 
     def __post_init__(self):
+        if self.sms_split is not None:
+            if not 1 <= int(self.sms_split) <= MAX_SMS_SPLIT:
+                raise InputError("render_reference", "sms_split", f"{self.sms_split} is outside "
+                                 f"[1, {MAX_SMS_SPLIT}]", "give the rest's samples per sampled one, or none")
+            b = self.scene.boundary
+            if int(self.sms_split) > 1 and not (ms.smooth_dielectric(b) and b.sms_trials):
+                raise InputError("render_reference", "sms_split", "the scene samples no specular manifolds "
+                                 "([boundary] sms_trials is 0 or the boundary is not a smooth dielectric)",
+                                 "leave sms_split unset")
         extra = json.dumps(self.extra_emitters, sort_keys=True, default=repr) if self.extra_emitters else ""
         digest = hashlib.sha256(extra.encode()).hexdigest()[:8]
         self.key = f"{self.scene.content_hash[:16]}-{self.variant}-{self.threads}-{digest}"
+
+    @property
+    def split(self):
+        """The rest's samples per sampled one, or 1 (the full image is one pass)."""
+        if self.sms_split is not None:
+            return int(self.sms_split)
+        b = self.scene.boundary
+        return DEFAULT_SMS_SPLIT if ms.smooth_dielectric(b) and b.sms_trials else 1
 
     def passes(self):
         kinds = ["full"]
         if self.extra_emitters or ms.absorber_is_black(self.scene) is None:
             kinds.append("absorber")
-        return [PassSpec(k, c) for k in kinds for c in ms.channel_passes(self.scene.medium)]
+        # The absorber (albedo 0) has no medium vertex to sample from: it is never split.
+        parts = {"full": ("rest", "sampled") if self.split > 1 else (None,), "absorber": (None,)}
+        return [PassSpec(k, c, part) for k in kinds for c in ms.channel_passes(self.scene.medium) for part in parts[k]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +122,7 @@ def _mitsuba_scene(mi, setup, spec):
     if key not in _LOADED:
         albedo = 0.0 if spec.kind == "absorber" else None
         d = ms.build_scene_dict(setup.scene, albedo_override=albedo, extra_emitters=setup.extra_emitters,
-                                channel=spec.channel)
+                                channel=spec.channel, part=spec.part)
         _LOADED[key] = mi.load_dict(d)
         while len(_LOADED) > _LOADED_MAX:
             _LOADED.popitem(last=False)
@@ -172,12 +202,13 @@ def _fault_injection(job):
 class _Estimate:
     """Per-(pass, seed) sums and counts over one seed set; results are added in chunk order."""
 
-    def __init__(self, passes, seeds):
-        self.passes, self.seeds = list(passes), list(seeds)
+    def __init__(self, passes, seeds, split=1):
+        self.passes, self.seeds, self.split = list(passes), list(seeds), int(split)
         self.sums = {(p.name, self.seed_of(p, s)): 0.0 for p in self.passes for s in self.seeds}
         self.counts = {k: 0 for k in self.sums}
         self.next_chunk = {k: 0 for k in self.sums}     # next chunk to merge
         self.planned = {k: 0 for k in self.sums}        # next chunk index to hand out
+        self.nominal = {k: 0 for k in self.sums}        # samples per seed handed out, before the split
         self.pending = {}                                # (pass, seed, chunk) -> result, out of order
         self.spp = 0                                     # spp per seed once the current round is in
 
@@ -188,15 +219,20 @@ class _Estimate:
         return seed + (2 * SEED_STRIDE if spec.kind == "absorber" else 0)
 
     def jobs(self, spp, chunk_spp):
-        """Jobs that add ``spp`` samples to every (pass, seed), in chunks of <= ``chunk_spp``."""
+        """Jobs that add ``spp`` samples to every (pass, seed), in chunks of <= ``chunk_spp``; a ``sampled``
+        part's pass gets ``ceil(n / split)`` samples once ``n`` have been handed out to the seed (at least one,
+        so its ratio to the rest is ``split`` up to the rounding, whatever the rounds)."""
         out = []
         for s0 in self.seeds:
             for p in self.passes:
                 s = self.seed_of(p, s0)
+                k = (p.name, s)
+                before = self.nominal[k]
+                self.nominal[k] = before + spp
+                want = spp if p.part != "sampled" else -(-self.nominal[k] // self.split) - -(-before // self.split)
                 done = 0
-                while done < spp:
-                    n = min(chunk_spp, spp - done)
-                    k = (p.name, s)
+                while done < want:
+                    n = min(chunk_spp, want - done)
                     j = self.planned[k]
                     if j >= CHUNK_SEEDS or not 0 <= s * CHUNK_SEEDS + j < 2 ** 32:
                         raise InputError("render_reference", "seed_base", f"seed {s} (chunk {j}) leaves Mitsuba's "
@@ -220,30 +256,36 @@ class _Estimate:
         return True
 
     def snapshot(self):
-        return (dict(self.sums), dict(self.counts), dict(self.next_chunk), dict(self.planned), self.spp)
+        return (dict(self.sums), dict(self.counts), dict(self.next_chunk), dict(self.planned), self.spp,
+                dict(self.nominal))
 
     def restore(self, snap):
-        self.sums, self.counts, self.next_chunk, self.planned, self.spp = (dict(snap[0]), dict(snap[1]),
-                                                                           dict(snap[2]), dict(snap[3]), snap[4])
+        self.sums, self.counts, self.next_chunk, self.planned, self.spp, self.nominal = (
+            dict(snap[0]), dict(snap[1]), dict(snap[2]), dict(snap[3]), snap[4], dict(snap[5]))
         self.pending = {}
 
     def samples_done(self):
-        """Samples per pixel merged so far, summed over seeds (mean over passes)."""
-        return sum(self.counts.values()) / max(len(self.passes), 1)
+        """Samples per pixel merged so far, summed over seeds (mean over the passes; a split's ``sampled``
+        part, which renders fewer, is not counted)."""
+        counted = [p.name for p in self.passes if p.part != "sampled"]
+        return sum(v for (name, _), v in self.counts.items() if name in counted) / max(len(counted), 1)
 
     def stack(self, kind):
-        """Per-seed mean images of ``kind`` (``full`` or ``absorber``), (K, H, W, 3); None without that pass."""
+        """Per-seed mean images of ``kind`` (``full`` or ``absorber``), (K, H, W, 3); None without that pass.
+        A grey pass gives its channel; the parts of a split pass (``rest``, ``sampled``) add."""
         specs = [p for p in self.passes if p.kind == kind]
         if not specs:
             return None
         out = []
         for s0 in self.seeds:
             s = self.seed_of(specs[0], s0)
-            if specs[0].channel is None:
-                out.append(self.sums[(specs[0].name, s)] / self.counts[(specs[0].name, s)])
-            else:
-                chans = [self.sums[(p.name, s)][..., p.channel] / self.counts[(p.name, s)] for p in specs]
-                out.append(np.stack(chans, axis=-1))
+            img = 0.0
+            for p in specs:
+                mean = self.sums[(p.name, s)] / self.counts[(p.name, s)]
+                if p.channel is not None:
+                    mean = np.where(np.arange(3) == p.channel, mean, 0.0)
+                img = img + mean
+            out.append(np.asarray(img, np.float64))
         return np.stack(out)
 
     def images(self):

@@ -312,10 +312,14 @@ def grey_medium_scene(scene, channel):
                              albedo=np.repeat(m.albedo[..., channel:channel + 1], 3, axis=3))
 
 
-def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEPTH, rr_depth=None):
+def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEPTH, rr_depth=None, part=None):
     """The integrator of ``scene`` (a pass's albedo override and colour channel): ``volpath``, or
     ``mneevolpath`` with :data:`MNEE_PARAMS` behind a smooth dielectric; ``rr_depth`` defaults to
-    :func:`rr_depth_for` the pass's largest albedo."""
+    :func:`rr_depth_for` the pass's largest albedo. ``part`` splits a scene with specular manifold
+    sampling into two images whose sum has the whole's expectation: ``"rest"`` (sampling off) and
+    ``"sampled"`` (only the sampled solutions' light, ``sms_only``); None renders the whole."""
+    if part not in (None, "rest", "sampled"):
+        raise ValueError(f"integrator_dict: part = {part!r} must be None, 'rest' or 'sampled'")
     if rr_depth is None:
         if albedo_override is not None:
             a = float(np.max(albedo_override))
@@ -326,8 +330,12 @@ def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEP
     d = {"type": "volpath", "max_depth": int(max_depth), "rr_depth": int(rr_depth)}
     if smooth_dielectric(scene.boundary):
         d = {**d, "type": "mneevolpath", **MNEE_PARAMS, "max_crossings": int(scene.boundary.max_crossings)}
-        if scene.boundary.sms_trials:          # specular manifold sampling (harness.reference.mnee_sms)
+        if scene.boundary.sms_trials and part != "rest":   # specular manifold sampling (mnee_sms)
             d.update(sms_trials=int(scene.boundary.sms_trials), sms_chains=str(scene.boundary.sms_chains))
+            if part == "sampled":
+                d["sms_only"] = True
+    if part is not None and d.get("sms_trials", 0) == 0 and part == "sampled":
+        raise ValueError("integrator_dict: part = 'sampled' needs a smooth dielectric with [boundary] sms_trials > 0")
     return d
 
 
@@ -345,7 +353,7 @@ def area_light_limit(position, intensity, radius, max_depth):
 
 def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, lights=True,
                      phase="auto", filter_type=GRID_FILTER, max_depth=MAX_DEPTH, rr_depth=None,
-                     sample_emitters=None, channel=None, integrator=None):
+                     sample_emitters=None, channel=None, integrator=None, part=None):
     """Mitsuba ``load_dict`` dictionary for ``scene`` (the variant must be set: :func:`use_variant`).
 
     ``albedo_override`` replaces the albedo grid (0 gives the pure absorber whose
@@ -355,10 +363,11 @@ def build_scene_dict(scene, albedo_override=None, spp=1, extra_emitters=None, li
     ``sample_emitters`` overrides the medium's next-event estimation (validation).
     ``rr_depth`` defaults to :func:`rr_depth_for` the medium's (or the pass's) largest albedo;
     ``channel`` (0, 1, 2) makes the grey pass of that channel (:func:`channel_passes`);
-    ``integrator`` replaces the integrator dict of :func:`integrator_dict` (validation).
+    ``integrator`` replaces the integrator dict of :func:`integrator_dict` (validation); ``part`` is
+    :func:`integrator_dict`'s (one of the two images of a split specular manifold sampling).
     The seed is not part of the scene: it is passed to ``mi.render``.
     """
-    integrator = integrator or integrator_dict(scene, albedo_override, channel, max_depth, rr_depth)
+    integrator = integrator or integrator_dict(scene, albedo_override, channel, max_depth, rr_depth, part)
     if channel is not None:
         scene = grey_medium_scene(scene, channel)
     d = {

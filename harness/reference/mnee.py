@@ -42,6 +42,13 @@ r"""Volumetric path tracer with manifold next-event estimation through smooth di
      - |string|
      - With ``sms_trials``: the chains sampled, from the medium vertex: ``T`` a refraction, ``R``
        a reflection inside, ``r`` one off the outside, comma-separated. Default: ``T,RT,Tr,TTT``
+   * - sms_only
+     - |bool|
+     - With ``sms_trials``: the image holds only the light of the sampled solutions (7.), nothing
+       else. Their light is added to the rest's as distinct paths (no weights shared), so an image
+       rendered with ``sms_trials = 0`` plus one rendered with ``sms_only`` has the expectation of the
+       whole: the reference renders the costly sampled part with fewer samples than the rest
+       (:class:`harness.reference.jobs.PassSpec`). Default: false
    * - stats
      - |bool|
      - Add AOV channels per pixel (sums over the path's vertices, averaged over samples,
@@ -191,7 +198,7 @@ from harness.reference.mnee_vertex import (  # noqa: E402, F401
 PLUGIN_NAME = "mneevolpath"
 DEFAULTS = {"max_depth": -1, "rr_depth": 5, "newton_iterations": 32, "newton_tolerance": 1e-5,
             "ratio_tracking_scale": 2.0, "stats": False, "probe_seeds": 0, "max_crossings": 5, "sms_trials": 0,
-            "sms_chains": sms.SMS_CHAINS_DEFAULT}
+            "sms_chains": sms.SMS_CHAINS_DEFAULT, "sms_only": False}
 STATS_AOVS = ("mnee_started", "mnee_converged", "mnee_connected",
               "mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more", "mnee_chain_connected", "mnee_lost", "mnee_over_max",
               "mnee_lost_r", "mnee_lost_g", "mnee_lost_b")
@@ -245,6 +252,9 @@ class MNEEVolpathIntegrator(ManifoldConnections):
         if not 0 <= self.sms_trials <= sms.MAX_TRIALS_LIMIT:
             raise ValueError(f"{PLUGIN_NAME}: sms_trials = {self.sms_trials} must lie in [0, {sms.MAX_TRIALS_LIMIT}]")
         self.sms_chains = sms.parse_chains(str(get("sms_chains")))
+        self.sms_only = bool(get("sms_only"))
+        if self.sms_only and not self.sms_trials:
+            raise ValueError(f"{PLUGIN_NAME}: sms_only = true needs sms_trials > 0 (nothing would be rendered)")
         self._eta_table = None
 
     def aov_names(self):
@@ -294,6 +304,7 @@ class MNEEVolpathIntegrator(ManifoldConnections):
         active = mi.Bool(active)
         medium = dr.zeros(mi.MediumPtr) if medium is None else mi.MediumPtr(medium)
         L = mi.Spectrum(0.0)                       # radiance
+        rest = 0.0 if self.sms_only else 1.0       # the weight of all light but the sampled solutions
         beta = mi.Spectrum(1.0)                    # throughput
         eta = mi.Float(1.0)                        # accumulated relative index (Russian roulette)
         depth = mi.UInt32(0)                       # segments so far
@@ -359,11 +370,12 @@ class MNEEVolpathIntegrator(ManifoldConnections):
                 weight = beta["rgb".index(name[-1])] if name[-2:] in ("_r", "_g", "_b") else 1.0
                 counters[k] += dr.select(nee, stats[k] * weight, 0.0)
             phase_val, phase_pdf = phase.eval_pdf(phase_ctx, mei, direction, nee)
-            L[nee] += beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
-            for extra_value, extra_dir in extras:      # chains, and the sampled solutions (distinct paths)
+            L[nee] += rest * beta * phase_val * value * dr.select(nee_pdf > 0, _mis(nee_pdf, phase_pdf), 1.0)
+            weights = [rest] + [1.0] * (len(extras) - 1)           # the chains, then the sampled solutions
+            for weight, (extra_value, extra_dir) in zip(weights, extras):   # (distinct paths)
                 chained = nee & dr.any(extra_value != 0.0)
                 phase_extra, _ = phase.eval_pdf(phase_ctx, mei, extra_dir, chained)
-                L[chained] += beta * phase_extra * extra_value
+                L[chained] += weight * beta * phase_extra * extra_value
 
             # ---------------- phase-function sampling
             wo, phase_w, phase_pdf = phase.sample(phase_ctx, mei, sampler.next_1d(real), sampler.next_2d(real), real)
@@ -386,7 +398,7 @@ class MNEEVolpathIntegrator(ManifoldConnections):
             ds = mi.DirectionSample3f(scene, si, prev_it)
             em_pdf = scene.pdf_emitter_direction(prev_it, ds, hit_emitter & ~specular_chain)
             w_hit = dr.select(specular_chain, 1.0, _mis(prev_pdf, em_pdf))
-            L[hit_emitter] += beta * w_hit * emitter.eval(si, hit_emitter)
+            L[hit_emitter] += rest * beta * w_hit * emitter.eval(si, hit_emitter)
 
             on_surface &= si.is_valid()
             bsdf_ctx = mi.BSDFContext()
@@ -402,7 +414,7 @@ class MNEEVolpathIntegrator(ManifoldConnections):
             tr_s = self._transmittance_to(scene, sampler, si, ds_s.p, medium_s, nee_s)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds_s.d), nee_s)
             w_s = dr.select(ds_s.delta, 1.0, _mis(ds_s.pdf / sel_weight, bsdf_pdf))
-            L[nee_s] += beta * bsdf_val * em_s * sel_weight * tr_s * w_s
+            L[nee_s] += rest * beta * bsdf_val * em_s * sel_weight * tr_s * w_s
 
             # BSDF sampling (camera-side refraction included)
             bs, bsdf_w = bsdf.sample(bsdf_ctx, si, sampler.next_1d(on_surface), sampler.next_2d(on_surface),

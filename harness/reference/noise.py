@@ -19,7 +19,7 @@ from harness.metrics.coverage import FULL_COVERAGE
 LIT_FRACTION = 0.01          # lit: brighter than this fraction of the 99th percentile
 
 
-def unit_cost(jobs, overhead=0.0):
+def unit_cost(jobs, overhead=0.0, weights=None):
     """Seconds per sample of one (pass, seed) unit from a round's ``jobs`` ``[(pass, spp, seconds[, kernels])]``.
 
     Where every job has its kernels' execution seconds (Dr.Jit's kernel history, compilation apart),
@@ -28,14 +28,18 @@ def unit_cost(jobs, overhead=0.0):
     pass, the lower quartile of its jobs' seconds (scaled to the round's median sample count; a job
     that compiled a kernel is a slow outlier), less ``overhead`` seconds per job (at most half a
     job's time). The passes' figures are averaged (a grey pass per colour channel costs what its
-    channel's sigma_t makes it cost).
+    channel's sigma_t makes it cost). ``weights`` (pass name -> samples per sample of the unit, 1 where
+    absent) weighs a pass that renders fewer samples than the others: the sampled solutions' part of a
+    split reference (:class:`.jobs.PassSpec`).
     """
     jobs = [tuple(j) + (None,) * (4 - len(j)) for j in jobs]
     passes = sorted({q for q, *_ in jobs})
+    w = {p: (weights or {}).get(p, 1.0) for p in passes}
     if all(k is not None for *_, k in jobs):
-        return float(np.mean([np.mean([k / n for q, n, _, k in jobs if q == p]) for p in passes]))
+        return float(np.mean([w[p] * np.mean([k / n for q, n, _, k in jobs if q == p]) for p in passes]))
     spp = float(np.median([n for _, n, _, _ in jobs]))
-    t = float(np.mean([np.percentile([sec / n * spp for q, n, sec, _ in jobs if q == p], 25) for p in passes]))
+    t = float(np.mean([w[p] * np.percentile([sec / n * spp for q, n, sec, _ in jobs if q == p], 25)
+                       for p in passes]))
     return (t - min(overhead, 0.5 * t)) / spp
 
 

@@ -76,7 +76,7 @@ class ReferencePlan:
         self.passes = setup.passes()
         cam = self.scene.camera
         self.chunk_spp = max(1, MAX_LANES // (cam.width * cam.height))
-        self.final = _Estimate(self.passes, [self.seed_base + i for i in range(K)])
+        self.final = _Estimate(self.passes, [self.seed_base + i for i in range(K)], setup.split)
         self.pilot_est = None
         self.progress_enabled = progress
         self.progress = None
@@ -182,7 +182,8 @@ class ReferencePlan:
         """
         each = self._round_spp.get("each")
         if each:
-            self.cost = unit_cost(each, self.job_overhead)
+            weights = {p.name: 1.0 / self.setup.split for p in self.passes if p.part == "sampled"}
+            self.cost = unit_cost(each, self.job_overhead, weights)
 
     def _round_wall(self, spp):
         """Predicted wall seconds to add ``spp`` samples to every (pass, seed) of the final estimate."""
@@ -218,7 +219,7 @@ class ReferencePlan:
         final, K = self.final, self.K
         want, capped = self.spp_fixed, None
         if want is None:
-            pilot = _Estimate(self.passes, [self.seed_base + SEED_STRIDE + i for i in range(PILOT_K)])
+            pilot = _Estimate(self.passes, [self.seed_base + SEED_STRIDE + i for i in range(PILOT_K)], self.setup.split)
             self.pilot_est = pilot
             model, outside = self._cost_model_seconds()
             self.progress.log((f"the cost model predicts {format_duration(model)} for the final render, before "
@@ -416,6 +417,7 @@ class ReferencePlan:
             "seeds": final.seeds,
             "seeds_absorber": [s + 2 * SEED_STRIDE for s in final.seeds] if absorber else [],
             "passes": [p.name for p in self.passes],
+            "sms_split": self.setup.split,
             "seed_note": (f"mi.render seed = seed * {CHUNK_SEEDS} + chunk index (chunks of <= {MAX_LANES} samples "
                           f"in flight); pilot seeds start at seed_base + {SEED_STRIDE}, absorber seeds at "
                           f"seed_base + {2 * SEED_STRIDE}; a grey pass per channel uses its kind's seeds"),

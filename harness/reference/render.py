@@ -41,6 +41,15 @@ all planned samples are in and the target is still missed, every seed is topped 
 to ``reference.json`` is the one *measured* on the final render (``target_met``
 says whether it meets the target; ``capped_by`` names a cap that stopped it).
 
+Specular manifold sampling in a pass of its own. Behind a smooth dielectric with ``[boundary] sms_trials``,
+the sampled solutions' light (``mneevolpath``'s 7.) is a few per cent of the image and much of its
+cost, and it adds to the rest's as distinct paths. So each full pass is split in two (``sms_split``,
+:class:`.jobs.RenderSetup`; :data:`.jobs.DEFAULT_SMS_SPLIT` where none is given): the rest, with sampling
+off, and the sampled light alone (``sms_only``) with one sample for every ``sms_split`` of the rest.
+A seed's image is the sum of its two parts' means, so its expectation is the whole's and the seeds'
+spread still gives the noise (``tests/test_sms_split.py``; the time to the target,
+``docs/benchmarks/bench_sms_split.md``). ``sms_split = 1`` renders one pass.
+
 Scheduling. The work is a set of independent *jobs*, one ``mi.render`` call
 each: a pass, a seed, the seed's chunk index and a sample count
 (:class:`.jobs.Job`). :func:`.jobs.render_job` is the unit a worker runs (it builds each
@@ -100,7 +109,7 @@ class SerialExecutor:
 
 def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, variant=None, max_seconds=None,
                      max_spp_per_seed=MAX_SPP_PER_SEED, seed_base=0, extra_emitters=None, threads=None,
-                     client=None, progress=False, steps=None, judge_exactness=True):
+                     client=None, progress=False, steps=None, judge_exactness=True, sms_split=None):
     """Render the reference folder of ``scene`` into ``out_dir`` (atomically) and return its metadata.
 
     Parameters
@@ -122,10 +131,12 @@ def render_reference(scene, out_dir, spp=None, K=None, target_rel_se=0.05, varia
     judge_exactness : measure a smooth-dielectric scene's exactness verdict (:mod:`harness.reference.losses`)
         after the render. ``False`` (timing benchmarks only) skips it and records ``"exact": false``,
         "not judged", so that no accuracy verdict is drawn against the folder.
+    sms_split : with specular manifold sampling, render the sampled solutions' light in a pass of its own with
+        one sample per ``sms_split`` of the rest (:class:`.jobs.RenderSetup`); None or 1 renders one pass.
 
     Returns the dict written to ``reference.json``.
     """
-    setup = RenderSetup(scene, variant=variant, threads=threads, extra_emitters=extra_emitters)
+    setup = RenderSetup(scene, variant=variant, threads=threads, extra_emitters=extra_emitters, sms_split=sms_split)
     if client is None:
         executor = SerialExecutor()
         plan = ReferencePlan(setup, out_dir, spp=spp, K=K, target_rel_se=target_rel_se, max_seconds=max_seconds,

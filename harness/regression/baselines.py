@@ -346,8 +346,10 @@ def reference_agreement(old, new, significance=SIGNIFICANCE, k_old=None, k_new=N
 
 
 def regenerate_reference(scene_name, seed_offset=None, target=None, into=None, client=None, threads=None,
-                         progress=False):
+                         progress=False, sms_split=None):
     """Render the small reference again with new seeds; keep it only if it agrees with the old one.
+
+    ``sms_split``: :func:`harness.reference.render.render_reference`'s (None: its default).
 
     ``into`` writes the new reference to another folder instead of replacing the
     committed one (the accuracy meta-tests keep such re-seeded references). ``client``
@@ -364,6 +366,7 @@ def regenerate_reference(scene_name, seed_offset=None, target=None, into=None, c
     base_seed = seed_offset if seed_offset is not None else int(max(old_seeds)) + 1000
     target = target or scene.tolerances.get("small_reference_rel_se")
     kwargs = {"target_rel_se": float(target)} if target else {}
+    kwargs["sms_split"] = sms_split
     tmp_root = REPO / "cache" / "regenerate"
     tmp_root.mkdir(parents=True, exist_ok=True)
     out = tmp_root / scene_name
@@ -461,7 +464,8 @@ def run_baselines_cli(args):
     client, cluster, threads = _client(args.scheduler, args.workers, args.serial)
     try:
         out = [regenerate_reference(n, into=args.into, client=client, threads=threads,
-                                    progress=args.progress and not args.json) for n in names]
+                                    progress=args.progress and not args.json, sms_split=args.sms_split)
+               for n in names]
     finally:
         if client is not None:
             client.close()

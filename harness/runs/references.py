@@ -225,7 +225,7 @@ def _client(scheduler, workers, serial):
 
 def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=None, force=False,
                       max_minutes=None, estimate=False, size=None, workers=None, scheduler=None, serial=False,
-                      progress=True):
+                      progress=True, sms_split=None):
     """``sslpv-harness reference SCENE [...]``: render (or fetch from the cache) a suite scene's reference.
 
     Copies it to ``out_dir`` when given, and returns what it wrote and measured. ``estimate``
@@ -258,7 +258,8 @@ def run_reference_cmd(scene_name, out_dir=None, target=None, spp=None, variant=N
 
         n_slots = None if serial else (workers or os.cpu_count() or 1)
         return estimate_reference(scene, target, workers=n_slots, scheduler=scheduler)
-    kwargs = {"spp": spp, "variant": variant, "target_rel_se": target, "max_seconds": max_seconds}
+    kwargs = {"spp": spp, "variant": variant, "target_rel_se": target, "max_seconds": max_seconds,
+              "sms_split": sms_split}
     client, cluster, threads = _client(scheduler, workers, serial)
     try:
         before = _plan.RENDER_COUNT

@@ -9,6 +9,7 @@ terms, file and leave-one-scene-out fit) in :mod:`.catalogue_form`.
 """
 
 from .catalogue_form import FORM
+from .catalogue_reference import REFERENCE
 from .catalogue_rivals import RIVALS
 from .runner import Mutation
 
@@ -741,4 +742,4 @@ MUTATIONS = (
              ("tests/test_connection_power.py::test_the_points_are_the_delivered_power_and_the_spread_page_reads_their_"
               "tail",),
              "the spread page's tail column sums the lightest points, not the heaviest, so a heavy tail reads as none"),
-) + RIVALS + FORM
+) + RIVALS + FORM + REFERENCE
