@@ -76,8 +76,9 @@ def main():
             wall, r2, sampled = measure(scene, split, args.spp)
             cost = wall * r2
             base = cost if split == 1 else base
-            rows.append([scene.name, f"{b.sms_trials} ({b.sms_chains})", str(split),
-                         (f"{args.spp} / {sampled}" if split > 1 else f"{args.spp} (whole)"), f"{wall:.1f}", f"{r2 ** 0.5:.4f}", f"{cost / base:.3f}"])
+            parts = f"{args.spp} / {sampled}" if split > 1 else f"{args.spp} (whole)"
+            rows.append([scene.name, f"{b.sms_trials} ({b.sms_chains})", str(split), parts, f"{wall:.1f}",
+                         f"{r2 ** 0.5:.4f}", f"{cost / base:.3f}"])
             print(rows[-1], flush=True)
     page.table(["scene", "sms_trials (chains)", "split", "spp per seed: rest / sampled", "wall [s]", "r",
                 "time to target, to split 1"], rows)

@@ -72,8 +72,7 @@ class RenderSetup:
             if not 1 <= int(self.sms_split) <= MAX_SMS_SPLIT:
                 raise InputError("render_reference", "sms_split", f"{self.sms_split} is outside "
                                  f"[1, {MAX_SMS_SPLIT}]", "give the rest's samples per sampled one, or none")
-            b = self.scene.boundary
-            if int(self.sms_split) > 1 and not (ms.smooth_dielectric(b) and b.sms_trials):
+            if int(self.sms_split) > 1 and not self.samples_manifolds:
                 raise InputError("render_reference", "sms_split", "the scene samples no specular manifolds "
                                  "([boundary] sms_trials is 0 or the boundary is not a smooth dielectric)",
                                  "leave sms_split unset")
@@ -82,12 +81,17 @@ class RenderSetup:
         self.key = f"{self.scene.content_hash[:16]}-{self.variant}-{self.threads}-{digest}"
 
     @property
+    def samples_manifolds(self):
+        """Whether the scene's reference samples specular manifolds (a smooth dielectric with ``sms_trials``)."""
+        b = self.scene.boundary
+        return bool(ms.smooth_dielectric(b) and b.sms_trials)
+
+    @property
     def split(self):
         """The rest's samples per sampled one, or 1 (the full image is one pass)."""
         if self.sms_split is not None:
             return int(self.sms_split)
-        b = self.scene.boundary
-        return DEFAULT_SMS_SPLIT if ms.smooth_dielectric(b) and b.sms_trials else 1
+        return DEFAULT_SMS_SPLIT if self.samples_manifolds else 1
 
     def passes(self):
         kinds = ["full"]
@@ -208,7 +212,7 @@ class _Estimate:
         self.counts = {k: 0 for k in self.sums}
         self.next_chunk = {k: 0 for k in self.sums}     # next chunk to merge
         self.planned = {k: 0 for k in self.sums}        # next chunk index to hand out
-        self.nominal = {k: 0 for k in self.sums}        # samples per seed handed out, before the split
+        self.handed_out = 0                              # samples per seed handed out (the rest's)
         self.pending = {}                                # (pass, seed, chunk) -> result, out of order
         self.spp = 0                                     # spp per seed once the current round is in
 
@@ -222,14 +226,14 @@ class _Estimate:
         """Jobs that add ``spp`` samples to every (pass, seed), in chunks of <= ``chunk_spp``; a ``sampled``
         part's pass gets ``ceil(n / split)`` samples once ``n`` have been handed out to the seed (at least one,
         so its ratio to the rest is ``split`` up to the rounding, whatever the rounds)."""
+        before, self.handed_out = self.handed_out, self.handed_out + spp
+        sampled = -(-self.handed_out // self.split) - -(-before // self.split)
         out = []
         for s0 in self.seeds:
             for p in self.passes:
                 s = self.seed_of(p, s0)
                 k = (p.name, s)
-                before = self.nominal[k]
-                self.nominal[k] = before + spp
-                want = spp if p.part != "sampled" else -(-self.nominal[k] // self.split) - -(-before // self.split)
+                want = sampled if p.part == "sampled" else spp
                 done = 0
                 while done < want:
                     n = min(chunk_spp, want - done)
@@ -257,11 +261,11 @@ class _Estimate:
 
     def snapshot(self):
         return (dict(self.sums), dict(self.counts), dict(self.next_chunk), dict(self.planned), self.spp,
-                dict(self.nominal))
+                self.handed_out)
 
     def restore(self, snap):
-        self.sums, self.counts, self.next_chunk, self.planned, self.spp, self.nominal = (
-            dict(snap[0]), dict(snap[1]), dict(snap[2]), dict(snap[3]), snap[4], dict(snap[5]))
+        self.sums, self.counts, self.next_chunk, self.planned, self.spp, self.handed_out = (
+            dict(snap[0]), dict(snap[1]), dict(snap[2]), dict(snap[3]), snap[4], snap[5])
         self.pending = {}
 
     def samples_done(self):

@@ -334,7 +334,7 @@ def integrator_dict(scene, albedo_override=None, channel=None, max_depth=MAX_DEP
             d.update(sms_trials=int(scene.boundary.sms_trials), sms_chains=str(scene.boundary.sms_chains))
             if part == "sampled":
                 d["sms_only"] = True
-    if part is not None and d.get("sms_trials", 0) == 0 and part == "sampled":
+    if part == "sampled" and "sms_only" not in d:
         raise ValueError("integrator_dict: part = 'sampled' needs a smooth dielectric with [boundary] sms_trials > 0")
     return d
 
