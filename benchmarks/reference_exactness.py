@@ -13,9 +13,13 @@ reference's connections set three ways:
 * ``sampled``: with sampling, ``sms_trials`` = ``--trials`` (or the scene's own, where it sets one) and
   the scene's ``sms_chains`` (:data:`SAMPLED_CHAINS` where it sets none), or ``--chains`` where given.
 
-The loss is ``1 - delivered / traced`` of the first-scattered light, with its standard error (both
-routes' noise), decided beyond two standard errors of a quarter of the noise target; ``undecided``
-is judged not exact. Beside it: the points it took, and the wall time of the verdict.
+The loss is the share of the first-scattered light on the paths the connections do not find
+(:mod:`harness.reference.coverage`: photons traced in batches of 65536 while undecided, up to 2^20),
+decided beyond two standard errors of a quarter of the noise target; ``undecided`` is judged not
+exact. Beside it, the same share by power, ``1 - delivered / traced`` (one batch of points inside the
+mesh: :func:`harness.reference.losses.first_scatter`), which must agree with it within
+:data:`harness.reference.losses.CONSISTENT_SE` combined standard errors (``routes disagree``
+otherwise); and what each took.
 
 Usage: ``.venv/bin/python benchmarks/reference_exactness.py [--scenes A B ...] [--trials 256]``
 ``[--chains T,RT,Tr,TTT] [--ways committed chains sampled] [--write]``.
@@ -29,7 +33,7 @@ import time
 import numpy as np
 
 from harness.paths import REPO
-from harness.reference import losses
+from harness.reference import coverage, losses
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
 from harness.scene import load_scene, scene_hash
@@ -84,12 +88,15 @@ def main():
     ms.use_variant("llvm_ad_rgb")
     page = Page("reference_exactness", "Is the reference exact? The verdict on each smooth-dielectric scene")
     page.para(
-        "The share of the first-scattered light that `mneevolpath`'s connections miss (`1 - delivered / traced`: "
-        f"`harness/reference/losses.py`, photons traced through every specular path in batches of {losses.TRACE_PHOTONS} "
-        f"up to {losses.MAX_TRACE_PHOTONS} against the connections' power at points inside the mesh, in batches of "
-        f"{losses.DELIVERED_POINTS} up to {losses.MAX_DELIVERED_POINTS} while undecided), in per cent per channel "
-        "R / G / B with its standard error, and the verdict against a quarter of the scene's small-reference noise "
-        "target. `committed`: the connections as the committed small reference was rendered (its `reference.json`; "
+        "The share of the first-scattered light that `mneevolpath`'s connections miss, in per cent per channel "
+        "R / G / B with its standard error, two ways: on the photons' paths (`harness/reference/coverage.py`: at a "
+        "first-scatter point of every traced segment, whether the connection finds that photon's path; photons in "
+        f"batches of {coverage.PHOTONS} while undecided, up to {coverage.MAX_PHOTONS}), which the verdict decides "
+        "with, and by power (`1 - delivered / traced`, `harness/reference/losses.py`: photons traced through every "
+        f"specular path, {losses.TRACE_PHOTONS}, against the connections' power at {losses.DELIVERED_POINTS} points "
+        "inside the mesh), which must agree with it within "
+        f"{losses.CONSISTENT_SE:g} combined standard errors; and the verdict against a quarter of the scene's "
+        "small-reference noise target. `committed`: the connections as the committed small reference was rendered (its `reference.json`; "
         "one crossing where it names no `max_crossings`); `chains`: the scene's boundary without sampling; "
         f"`sampled`: with specular manifold sampling, `sms_trials` {args.trials} unless the scene sets its own.")
     rows = []
@@ -106,21 +113,28 @@ def main():
         for way in args.ways:
             bound = ways[way]
             if bound is None:
-                rows.append([name, way, "–", "no committed reference", "–", "–"])
+                rows.append([name, way, "–", "–", "–", "–", "no committed reference"])
                 continue
             t0 = time.perf_counter()
-            fs = losses.first_scatter(with_boundary(scene, bound), limit=limit)
-            seconds = time.perf_counter() - t0
+            cov = coverage.missed(with_boundary(scene, bound), limit=limit)
+            t1 = time.perf_counter()
+            fs = losses.first_scatter(with_boundary(scene, bound))
+            t2 = time.perf_counter()
             judged = {"channels": {c: {"lost_image_share": 0.0, "lost": 0.0, "over_max": 0.0} for c in "RGB"},
-                      "first_scatter": fs, "max_crossings": bound.max_crossings}
+                      "coverage": cov, "first_scatter": fs, "max_crossings": bound.max_crossings}
             exact, note = losses.verdict(judged, target)
             verdict = "exact" if exact else ("undecided" if "undecided" in note else "not exact")
+            if not losses.consistent(judged)[0]:
+                verdict = "routes disagree"
             setting = f"max_crossings {bound.max_crossings}" + (
                 f", sms_trials {bound.sms_trials} ({bound.sms_chains})" if bound.sms_trials else "")
-            rows.append([name, f"{way}: {setting}", f"{pct(fs['missed_share'])} ± {pct(fs['missed_share_se'])}",
-                         f"{verdict} (limit {100 * limit:.2f})", str(fs["points"]), f"{seconds:.0f}"])
+            rows.append([name, f"{way}: {setting}", f"{pct(cov['missed_share'])} ± {pct(cov['missed_share_se'])}",
+                         f"{cov['photons']} / {t1 - t0:.0f}",
+                         f"{pct(fs['missed_share'])} ± {pct(fs['missed_share_se'])}", f"{fs['points']} / {t2 - t1:.0f}",
+                         f"{verdict} (limit {100 * limit:.2f})"])
             print(rows[-1], flush=True)
-    page.table(["scene", "connections", "missed [%]", "verdict", "points", "wall [s]"], rows,
+    page.table(["scene", "connections", "missed on the photons' paths [%]", "photons / wall [s]",
+                "missed by power [%]", "points / wall [s]", "verdict"], rows,
                note="A scene whose committed way is not exact has a committed reference darker than its scene by "
                     "about the missed share where light first scatters; `sslpv-harness baselines "
                     "regenerate-references` renders it with the scene's own boundary.")

@@ -29,10 +29,19 @@ reference's size) and returns, per colour channel:
   :data:`DELIVERED_POINTS` points):
   ``missed_share = 1 - delivered / traced`` and its standard error (both routes' noise). It counts
   every loss of the connections at once: reflection vertices, single walks that end on another
-  (occluded) solution than the one that carries the light, chains the straight seed does not lead to.
+  (occluded) solution than the one that carries the light, chains the straight seed does not lead to;
+  and an error in the value of the connections made, of either sign.
+* ``coverage``: the same share counted on the photons' own paths (:mod:`harness.reference.coverage`):
+  at a first-scatter point of each traced segment, whether the integrator's connection finds that
+  photon's path (by the straight seed, or by specular manifold sampling's trials within ``sms_trials``).
+  Nothing there is weighted by the inverse probability of a sampled solution, so its standard error
+  falls as a Bernoulli share's, not as a heavy tail's (both routes side by side, scene by scene:
+  ``docs/benchmarks/reference_exactness.md``).
 
-:func:`verdict`: the reference is exact when every channel's loss (the larger of ``lost_image_share``
-and ``first_scatter.missed_share``) is at most
+:func:`verdict`: the reference is exact when the two routes agree (:func:`consistent`, within
+:data:`CONSISTENT_SE` combined standard errors: else the connections' value is in doubt) and every
+channel's loss (the larger of ``lost_image_share`` and ``coverage.missed_share``, or
+``first_scatter.missed_share`` in a reference measured before ``coverage``) is at most
 :data:`LOSS_FRACTION_OF_TARGET` of the reference's noise target (the median relative SE it
 was rendered to); otherwise ``reference.json`` says ``"exact": false`` and why, and
 :func:`check_exact` refuses to judge against it unless :data:`ALLOW_ENV` is set.
@@ -116,8 +125,13 @@ def measure(scene, variant="llvm_ad_rgb", spp=LOSS_SPP, seeds=LOSS_SEEDS, seed_b
                 "lost_image_share": float(ratio.mean()),
                 "lost_image_share_se": float(ratio.std(ddof=1) / np.sqrt(len(ratio))) if len(ratio) > 1 else None,
             }
+    from harness.reference import coverage
+
+    # The photons' paths decide the share missed (light-tailed); the power comparison, one batch, checks the
+    # connections' value against it (:func:`consistent`).
     return {"spp": spp, "seeds": seeds, "max_crossings": int(scene.boundary.max_crossings), "channels": out,
-            "first_scatter": first_scatter(scene, variant, limit=limit)}
+            "coverage": coverage.missed(scene, variant=variant, limit=limit),
+            "first_scatter": first_scatter(scene, variant)}
 
 
 def _traced(scene, photons, seed, limit, max_photons):
@@ -195,13 +209,20 @@ def first_scatter(scene, variant="llvm_ad_rgb", photons=TRACE_PHOTONS, points=DE
             "chains_over_max_share": part["chains_over_max"].tolist()}
 
 
+def _missed_route(losses):
+    """The measurement of the first-scattered light missed that the verdict decides with: the photons' paths
+    (``coverage``) where recorded, else the power comparison (``first_scatter``, older references), else None."""
+    return losses.get("coverage") or losses.get("first_scatter")
+
+
 def channel_loss(losses, name):
     """``(loss, which)``: the larger of a channel's ``lost_image_share`` and first-scatter ``missed_share``."""
     ch = losses["channels"][name]
-    fs = losses.get("first_scatter")
+    fs = _missed_route(losses)
     missed = fs["missed_share"]["RGB".index(name)] if fs else 0.0
     if missed > ch["lost_image_share"]:
-        return missed, "first-scattered light the connections miss"
+        on = " (on the photons' paths)" if "coverage" in losses else ""
+        return missed, "first-scattered light the connections miss" + on
     return ch["lost_image_share"], "image light of the connections not made"
 
 
@@ -209,10 +230,39 @@ def _decided(losses, name):
     """``(loss, se)`` of a channel as judged: the first-scattered light missed with its standard error where it
     is the larger loss, else the lost image share (whose light estimate has no bias toward exact)."""
     loss, which = channel_loss(losses, name)
-    fs = losses.get("first_scatter")
+    fs = _missed_route(losses)
     if fs and which.startswith("first-scattered") and "missed_share_se" in fs:
         return loss, float(fs["missed_share_se"]["RGB".index(name)])
     return loss, 0.0
+
+
+#: The power comparison and the photons' paths disagree when their missed shares differ by more than this many
+#: combined standard errors: the connections' value (not their reach) is then in doubt.
+CONSISTENT_SE = 3.0
+
+
+def consistent(losses):
+    """``(ok, reason)``: where both routes are recorded, whether ``1 - delivered / traced`` agrees with the share
+    missed on the photons' paths within :data:`CONSISTENT_SE` combined standard errors in every channel. The two
+    estimate the same share when every connection found carries the light of its path; a difference is an error
+    of the connections' value (geometry term, Fresnel, transmittance) or of one route."""
+    cov, fs = losses.get("coverage"), losses.get("first_scatter")
+    if not cov or not fs or "missed_share_se" not in fs:
+        return True, ""
+    worst = None
+    for c in range(3):
+        se = float(np.hypot(cov["missed_share_se"][c], fs["missed_share_se"][c]))
+        z = (fs["missed_share"][c] - cov["missed_share"][c]) / se if se > 0 else 0.0
+        if abs(z) > CONSISTENT_SE and (worst is None or abs(z) > abs(worst[1])):
+            worst = ("RGB"[c], z)
+    if worst is None:
+        return True, ""
+    c = "RGB".index(worst[0])
+    return False, (f"not exact: the connections' power misses {fs['missed_share'][c]:.2%} ± "
+                   f"{fs['missed_share_se'][c]:.2%} of the traced light but the photons' paths they do not find "
+                   f"carry {cov['missed_share'][c]:.2%} ± {cov['missed_share_se'][c]:.2%} (channel {worst[0]}, "
+                   f"{worst[1]:+.1f} standard errors, more than {CONSISTENT_SE:g}): the value of the connections "
+                   "found is in doubt")
 
 
 def verdict(losses, target_rel_se):
@@ -220,6 +270,10 @@ def verdict(losses, target_rel_se):
     :data:`DECIDED_SE` standard errors of its measurement; a loss within that band of the limit is undecided
     and judged not exact (the reason says so)."""
     limit = LOSS_FRACTION_OF_TARGET * float(target_rel_se)
+    ok, why = consistent(losses)
+    if not ok:
+        return False, why
+
     def upper(c):
         loss, se = _decided(losses, c)
         return loss + DECIDED_SE * se
@@ -230,6 +284,7 @@ def verdict(losses, target_rel_se):
     _, se = _decided(losses, name)
     fs = losses.get("first_scatter")
     refl = f", {fs['reflection_share']['RGB'.index(name)]:.2%} of it through reflections" if fs else ""
+    fs = _missed_route(losses)
     pm = f" ± {se:.2%}" if se else ""
     if loss + DECIDED_SE * se <= limit:
         return True, (f"exact: the connections miss an estimated {loss:.2%}{pm} ({which}, channel {name}), at most "

@@ -276,25 +276,19 @@ class ManifoldConnections(mi.SamplingIntegrator):
         value = dr.select(conn, sel_weight * intensity * fresnel_t * g * tr, 0.0)
         return conn, value, omega, verts[0][0]
 
-    def _connect(self, scene, sampler, mei, medium, active, depth, phase_value):
-        """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
+    def _seeded(self, scene, sampler, mei, medium, active, depth, emitter, u2, sel_weight):
+        """The connections from medium vertex ``mei`` to ``emitter`` that the straight seed leads to.
 
-        A connection through k crossings adds k + 1 segments to the path's ``depth``; where
-        they do not fit into ``max_depth``, an eligible vertex gets no connection of that
-        length (a straight one would be blocked by the interface). ``phase_value(direction)`` is
-        the phase function toward a direction (used by the probe seeds). Returns
-        ``(value, direction, pdf, extras, stats)``: the light arriving at ``mei`` along
-        ``direction`` divided by its sampling density (times the phase function gives the
-        contribution), the solid-angle pdf used for MIS (0 for delta lights), ``extras``: a list
-        of further ``(value, direction)`` pairs, each a distinct path added to the first (the
-        chain through 3, 5, ... crossings found where the seed segment crosses that many times,
-        up to ``max_crossings``; with ``sms_trials``, the specular manifold sampling estimates of
-        :mod:`harness.reference.mnee_sms`), and the :data:`STATS_AOVS` of this vertex (counts,
-        then the lost light times the phase function).
+        The straight seed toward the light, the single refraction's walk from where it leaves the object (or a
+        straight, ratio-tracked connection where no dielectric is in the way), and the chains through 3, 5, ...
+        crossings where the seed segment crosses that many times (up to ``max_crossings``). Returns a dict:
+        ``value``, ``direction``, ``pdf`` of the single or straight connection; ``chain_value``, ``chain_dir``,
+        ``chain_conn`` of the chains; ``connected``: ``{k: (x1, converged_or_connected, connected)}`` per number of
+        refractions, the first vertex of the solution each straight-seeded walk found (the single walk's
+        ``converged`` beside its ``connected``, as specular manifold sampling excludes a converged solution); and
+        ``manifold``, ``crossings``, ``same``, ``tr_straight``, ``converged``, ``y``, ``eta``, ``shape_id``,
+        ``ds``, ``em_val`` for :meth:`_connect` (:mod:`harness.reference.coverage` reads ``connected``).
         """
-        idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
-        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
-        u2 = sampler.next_2d(active)
         ds, em_val = emitter.sample_direction(mei, u2, active)
         active &= ds.pdf > 0
         delta_pos = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
@@ -331,16 +325,46 @@ class ManifoldConnections(mi.SamplingIntegrator):
         chain_value = mi.Spectrum(0.0)
         chain_dir = mi.Vector3f(ds.d)
         chain_conn = mi.Bool(False)
-        connected = {1: (x1, converged)}          # the solutions already connected, by number of refractions
+        connected = {1: (x1, converged, conn)}    # the solutions already connected, by number of refractions
         for k in range(3, self.max_crossings + 1, 2):
             lane = manifold & same & (crossings == k) & (depth + k < self.max_depth)
             conn_k, value_k, omega_k, x1_k = self._chain_value(scene, sampler, mei.p, y, ds.d, eta, shape_id, k,
                                                                emitter, u2, sel_weight, medium, lane)
-            connected[k] = (x1_k, conn_k)
+            connected[k] = (x1_k, conn_k, conn_k)
             chain_value[conn_k] = value_k
             chain_dir[conn_k] = omega_k
             chain_conn |= conn_k
-        extras = [(chain_value, chain_dir)]
+        return {"value": value, "direction": direction, "pdf": pdf, "chain_value": chain_value, "chain_dir": chain_dir,
+                "chain_conn": chain_conn, "connected": connected, "manifold": manifold, "crossings": crossings,
+                "same": same, "tr_straight": tr_straight, "converged": converged, "conn": conn, "y": y, "eta": eta,
+                "shape_id": shape_id, "ds": ds, "em_val": em_val}
+
+    def _connect(self, scene, sampler, mei, medium, active, depth, phase_value):
+        """Next-event estimation from medium vertex ``mei``: manifold connection or a straight one.
+
+        A connection through k crossings adds k + 1 segments to the path's ``depth``; where
+        they do not fit into ``max_depth``, an eligible vertex gets no connection of that
+        length (a straight one would be blocked by the interface). ``phase_value(direction)`` is
+        the phase function toward a direction (used by the probe seeds). Returns
+        ``(value, direction, pdf, extras, stats)``: the light arriving at ``mei`` along
+        ``direction`` divided by its sampling density (times the phase function gives the
+        contribution), the solid-angle pdf used for MIS (0 for delta lights), ``extras``: a list
+        of further ``(value, direction)`` pairs, each a distinct path added to the first (the
+        chain through 3, 5, ... crossings found where the seed segment crosses that many times,
+        up to ``max_crossings``; with ``sms_trials``, the specular manifold sampling estimates of
+        :mod:`harness.reference.mnee_sms`), and the :data:`STATS_AOVS` of this vertex (counts,
+        then the lost light times the phase function).
+        """
+        idx, sel_weight, _ = scene.sample_emitter(sampler.next_1d(active), active)
+        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), idx, active)
+        u2 = sampler.next_2d(active)
+        s = self._seeded(scene, sampler, mei, medium, active, depth, emitter, u2, sel_weight)
+        manifold, y, eta, shape_id, ds, em_val = s["manifold"], s["y"], s["eta"], s["shape_id"], s["ds"], s["em_val"]
+        value, direction, pdf, conn, converged = s["value"], s["direction"], s["pdf"], s["conn"], s["converged"]
+        crossings, chain_conn, tr_straight = s["crossings"], s["chain_conn"], s["tr_straight"]
+        connected = {k: v[:2] for k, v in s["connected"].items()}
+        x1 = connected[1][0]
+        extras = [(s["chain_value"], s["chain_dir"])]
         # ---- specular manifold sampling: further refraction solutions and chains with a reflection
         sms_found, sms_capped = mi.Bool(False), mi.Bool(False)
         if self.sms_trials:

@@ -175,7 +175,7 @@ def _cone_directions(apex, center, radius, n, rng):
     return d, 2.0 * np.pi * (1.0 - cos_max)
 
 
-def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
+def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0, record=None):
     """First-scattered power (W, per channel) by path type from every point light of ``scene``.
 
     ``eta`` defaults to the scene's boundary index. Mitsuba's variant must be set
@@ -184,6 +184,12 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
     (``leaked``: weight of rays that left the object through a grazing hit without a surface, dropped),
     and ``total_se`` (3,): the standard error of the total first-scattered power (each photon's deposits,
     all its branches together, are one sample of its stratum of the cone; collapsed pairs of strata).
+
+    ``record``: a list to which every batch of segments inside the medium is appended, as a dict of ``o``, ``d``,
+    ``t`` (start, direction, length), ``w`` (3,) the weight entering the segment, ``label``, ``verts``
+    (m, len(label), 3) the boundary events' positions from the light, ``pid`` the photon and ``light`` the
+    index of its light in ``scene.lights`` (:mod:`harness.reference.coverage` draws first-scatter points
+    from them).
     """
     eta = float(scene.boundary.eta if eta is None else eta)
     cast = _Caster(scene.mesh)
@@ -193,7 +199,7 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
     radius = float(np.linalg.norm(v - center, axis=1).max()) * 1.001
     by_label, truncated, cut, leaked = {}, np.zeros(3), np.zeros(3), np.zeros(3)
     variance = np.zeros(3)
-    for light in scene.lights:
+    for light_index, light in enumerate(scene.lights):
         y = np.asarray(light.position, np.float64)
         d, omega = _cone_directions(y, center, radius, photons, rng)
         o = np.tile(y, (photons, 1))
@@ -202,6 +208,7 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
         inside = np.zeros(photons, bool)
         labels = np.array([""] * photons, dtype=object)
         pid = np.arange(photons)                 # the photon each branch came from
+        hist = np.zeros((photons, 0, 3))         # each branch's boundary events so far (with ``record``)
         per_photon = np.zeros((photons, 3))
         for event in range(max_events + 1):
             if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
@@ -211,8 +218,12 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
             # offset beyond a thin part): dropped, its weight reported as leaked.
             leaked += w[inside & ~valid].sum(0)
             keep = valid
-            o, d, w, w0, inside, labels, t, p, n, ng, pid = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, ng,
-                                                                             pid))
+            o, d, w, w0, inside, labels, t, p, n, ng, pid, hist = (
+                a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, ng, pid, hist))
+            if inside.any() and record is not None:
+                record.append({"o": o[inside], "d": d[inside], "t": t[inside], "w": w[inside],
+                               "label": labels[inside], "verts": hist[inside], "pid": pid[inside],
+                               "light": light_index})
             if inside.any():
                 dep, tr = _segment(scene.medium, o[inside], d[inside], t[inside])
                 power = w[inside] * dep
@@ -249,6 +260,8 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0):
                                      labels[mt] + event_letter(inside[mt], in_t[mt])])
             inside = np.concatenate([in_r[mr], in_t[mt]])
             pid = np.concatenate([pid[mr], pid[mt]])
+            hist = np.concatenate([np.concatenate([hist[mr], p[mr, None]], 1),
+                                   np.concatenate([hist[mt], p[mt, None]], 1)])
         # The directions are stratified (one per ring of the cone): the variance of the sum by collapsed
         # strata, each pair of neighbouring rings one stratum of two samples (conservative).
         half = photons // 2

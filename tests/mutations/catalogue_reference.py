@@ -1,10 +1,12 @@
 """The planted errors in how a reference is rendered in parts: specular manifold sampling as a pass of its own
-(``sms_split``: :class:`harness.reference.jobs.RenderSetup`, ``mneevolpath``'s ``sms_only``); the rest are in
-:mod:`.catalogue`."""
+(``sms_split``: :class:`harness.reference.jobs.RenderSetup`, ``mneevolpath``'s ``sms_only``), and in the share
+of the light the reference misses, counted on the photons' paths (:mod:`harness.reference.coverage`) and judged
+(:mod:`harness.reference.losses`); the rest are in :mod:`.catalogue`."""
 
 from .runner import Mutation
 
 ST = "tests/test_sms_split.py"
+CV = "tests/test_coverage.py"
 
 REFERENCE = (
     Mutation("sms_split_drops_sampled_part", "mitsuba", "harness/reference/jobs.py",
@@ -28,4 +30,24 @@ REFERENCE = (
              (f"{ST}::test_the_cost_of_a_seed_sample_weighs_the_sampled_part_by_its_share",),
              "the seconds per sample of a split reference count the sampled part's pass at every sample, so a "
              "capped render plans too few samples"),
+    Mutation("coverage_point_weight_without_choice", "mitsuba", "harness/reference/coverage.py",
+             "* h[idx, None] / qk[:, None]", "* h[idx, None]",
+             (f"{CV}::test_points_carry_the_traced_power",),
+             "a first-scatter point's weight is not divided by the probability of its sub-interval, so the points "
+             "carry a fraction of the traced power and the share missed is weighed by the wrong light"),
+    Mutation("coverage_path_not_reversed", "mitsuba", "harness/reference/coverage.py",
+             "return tuple(KIND_OF_EVENT[c] for c in reversed(label))", "return tuple(KIND_OF_EVENT[c] for c in label)",
+             (f"{CV}::test_a_sampled_reflection_chain_is_found",),
+             "a photon's path is read from the light instead of from the medium vertex, so a sampled chain with a "
+             "reflection (ER is RT from the vertex) is looked for as another chain and counted missed"),
+    Mutation("coverage_straight_walk_ignored", "mitsuba", "harness/reference/coverage.py",
+             "            found |= conn & same\n", "",
+             (f"{CV}::test_a_convex_sphere_misses_its_reflections",),
+             "the paths the straight seed's walk connects are not counted as found, so every refraction is "
+             "called missed where no sampling finds it"),
+    Mutation("verdict_ignores_disagreeing_routes", "mitsuba", "harness/reference/losses.py",
+             "    ok, why = consistent(losses)\n    if not ok:\n        return False, why\n", "",
+             (f"{CV}::TestVerdict::test_routes_that_disagree_are_refused",),
+             "a reference whose connections deliver less light than the paths they find carry is judged exact "
+             "by the share of paths found alone"),
 )
