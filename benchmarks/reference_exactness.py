@@ -14,7 +14,8 @@ reference's connections set three ways:
   the scene's ``sms_chains`` (:data:`SAMPLED_CHAINS` where it sets none), or ``--chains`` where given.
 
 The loss is the share of the first-scattered light on the paths the connections do not find
-(:mod:`harness.reference.coverage`: photons traced in batches of 65536 while undecided, up to 2^20),
+(:mod:`harness.reference.coverage`: photons traced in batches of 65536, at least 2^18, more while undecided,
+up to 2^20; beside it the largest share of the missed light that one photon carries),
 decided beyond two standard errors of a quarter of the noise target; ``undecided`` is judged not
 exact. Beside it, the same share by power, ``1 - delivered / traced`` (one batch of points inside the
 mesh: :func:`harness.reference.losses.first_scatter`), which must agree with it within
@@ -91,8 +92,9 @@ def main():
         "The share of the first-scattered light that `mneevolpath`'s connections miss, in per cent per channel "
         "R / G / B with its standard error, two ways: on the photons' paths (`harness/reference/coverage.py`: at a "
         "first-scatter point of every traced segment, whether the connection finds that photon's path; photons in "
-        f"batches of {coverage.PHOTONS} while undecided, up to {coverage.MAX_PHOTONS}), which the verdict decides "
-        "with, and by power (`1 - delivered / traced`, `harness/reference/losses.py`: photons traced through every "
+        f"batches of {coverage.PHOTONS}, at least {coverage.MIN_PHOTONS}, more while undecided, up to "
+        f"{coverage.MAX_PHOTONS}; `heaviest` is the largest share of the missed light one photon carries, R / G / B), "
+        "which the verdict decides with, and by power (`1 - delivered / traced`, `harness/reference/losses.py`: photons traced through every "
         f"specular path, {losses.TRACE_PHOTONS}, against the connections' power at {losses.DELIVERED_POINTS} points "
         "inside the mesh), which must agree with it within "
         f"{losses.CONSISTENT_SE:g} combined standard errors; and the verdict against a quarter of the scene's "
@@ -129,11 +131,11 @@ def main():
             setting = f"max_crossings {bound.max_crossings}" + (
                 f", sms_trials {bound.sms_trials} ({bound.sms_chains})" if bound.sms_trials else "")
             rows.append([name, f"{way}: {setting}", f"{pct(cov['missed_share'])} ± {pct(cov['missed_share_se'])}",
-                         f"{cov['photons']} / {t1 - t0:.0f}",
+                         f"{cov['photons']} / {pct(cov['heaviest_share'])} / {t1 - t0:.0f}",
                          f"{pct(fs['missed_share'])} ± {pct(fs['missed_share_se'])}", f"{fs['points']} / {t2 - t1:.0f}",
                          f"{verdict} (limit {100 * limit:.2f})"])
             print(rows[-1], flush=True)
-    page.table(["scene", "connections", "missed on the photons' paths [%]", "photons / wall [s]",
+    page.table(["scene", "connections", "missed on the photons' paths [%]", "photons / heaviest [%] / wall [s]",
                 "missed by power [%]", "points / wall [s]", "verdict"], rows,
                note="A scene whose committed way is not exact has a committed reference darker than its scene by "
                     "about the missed share where light first scatters; `sslpv-harness baselines "

@@ -91,6 +91,20 @@ def test_a_convex_sphere_misses_its_reflections(mi):
     assert ok, why
 
 
+def test_a_limit_is_judged_after_the_fewest_photons(mi):
+    """With a limit the share is measured with at least ``min_photons`` even where the first batch decides (the
+    weights' tail: :mod:`harness.reference.coverage`); without one, with one batch."""
+    from harness.reference import coverage
+
+    scene = thin_sphere(sigma_t=(2.0, 3.0, 4.0))
+    scene = dataclasses.replace(scene, boundary=dataclasses.replace(scene.boundary, sms_trials=0))
+    judged = coverage.missed(scene, photons=1 << 10, seed=3, limit=0.5, min_photons=3 << 10)
+    assert judged["photons"] == 3 << 10
+    once = coverage.missed(scene, photons=1 << 10, seed=3)
+    assert once["photons"] == 1 << 10
+    assert all(0.0 < h <= 1.0 for h in judged["heaviest_share"]), judged["heaviest_share"]
+
+
 def _slab(sms_chains):
     from harness.reference import halfspace
     from harness.scene import scene_hash

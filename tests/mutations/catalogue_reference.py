@@ -50,4 +50,9 @@ REFERENCE = (
              (f"{CV}::TestVerdict::test_routes_that_disagree_are_refused",),
              "a reference whose connections deliver less light than the paths they find carry is judged exact "
              "by the share of paths found alone"),
+    Mutation("coverage_judged_after_one_batch", "mitsuba", "harness/reference/coverage.py",
+             "len(batches) * photons < min(min_photons, max_photons) or undecided()", "undecided()",
+             (f"{CV}::test_a_limit_is_judged_after_the_fewest_photons",),
+             "the share missed on the photons' paths is judged as soon as one batch decides, so a batch that drew "
+             "none of the heavy grazing photons can call a reference exact"),
 )
