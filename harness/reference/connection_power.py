@@ -73,7 +73,7 @@ def inside_points(scene, n, rng, loaded):
     kept, drawn, have = [], 0, 0
     while have < n:
         c = lo + (hi - lo) * rng.random((max(2 * (n - have), 4096), 3))
-        ins = _inside(mi, dr, mscene, mi.Point3f(*[mi.Float(c[:, i].astype(np.float32)) for i in range(3)]))
+        ins = _inside(mi, dr, mscene, point3f(mi, c))
         drawn += len(c)
         if not ins.any() and drawn > 64 * n:
             raise ValueError("connection_power: no point of the medium's box lies inside the mesh")
@@ -85,6 +85,24 @@ def inside_points(scene, n, rng, loaded):
     inside_box = np.all(v.min(0) >= lo - 1e-6 * (hi - lo)) and np.all(v.max(0) <= hi + 1e-6 * (hi - lo))
     volume = abs(float(signed_volume(scene.mesh))) if inside_box else float(np.prod(hi - lo)) * share
     return x, volume, share
+
+
+def point3f(mi, a):
+    """Positions (P, 3) as a Mitsuba ``Point3f`` (float32)."""
+    a = np.asarray(a)
+    return mi.Point3f(*[mi.Float(a[:, i].astype(np.float32)) for i in range(3)])
+
+
+def medium_vertices(mi, dr, mscene, x, inside=None):
+    """``(mei, inside)``: medium vertices at the points ``x`` (P, 3), in the object's interior medium where
+    ``inside`` (by the parity of ray hits where it is not given), in none elsewhere."""
+    x0 = point3f(mi, x)
+    inside = _inside(mi, dr, mscene, x0) if inside is None else np.asarray(inside, bool)
+    mei = dr.zeros(mi.MediumInteraction3f, len(x))
+    mei.p = x0
+    mei.t = mi.Float(0.0)
+    mei.medium = dr.select(mi.Bool(inside), mscene.shapes()[0].interior_medium(), dr.zeros(mi.MediumPtr))
+    return mei, inside
 
 
 def connection_values(scene, x, inside=None, seed=0, variant="llvm_ad_rgb", integrator=None, loaded=None):
@@ -101,16 +119,9 @@ def connection_values(scene, x, inside=None, seed=0, variant="llvm_ad_rgb", inte
     mi, dr, mscene = loaded or _load(scene, variant, integrator)
     integ = mscene.integrator()
     integ._prepare(mscene)
-    medium = mscene.shapes()[0].interior_medium()
-    n = len(x)
-    x0 = mi.Point3f(*[mi.Float(np.asarray(x)[:, i].astype(np.float32)) for i in range(3)])
-    inside = _inside(mi, dr, mscene, x0) if inside is None else np.asarray(inside, bool)
-    mei = dr.zeros(mi.MediumInteraction3f, n)
-    mei.p = x0
-    mei.t = mi.Float(0.0)
-    mei.medium = dr.select(mi.Bool(inside), medium, dr.zeros(mi.MediumPtr))
+    mei, inside = medium_vertices(mi, dr, mscene, x, inside)
     sampler = mi.load_dict({"type": "independent"})
-    sampler.seed(seed, n)
+    sampler.seed(seed, len(x))
     value, _, _, extras, _ = integ._connect(mscene, sampler, mei, mei.medium, mi.Bool(inside), mi.UInt32(0),
                                             lambda w, a: mi.Float(0.0))
     parts = [value] + [v for v, _ in extras]

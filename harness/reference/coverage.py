@@ -83,40 +83,25 @@ def draw_points(scene, record, rng):
     the light, (len(label), 3) each), ``light`` (P,) and ``photon`` (P,) (the light index times a large number
     plus the photon: one key per photon).
     """
-    from harness.reference.specular_paths import SUBSTEPS, _grid_lookup
+    from harness.reference.specular_paths import SUBSTEPS, substeps
 
-    segs = []
+    out = {"x": [], "W": [], "label": [], "verts": [], "light": [], "photon": []}
     for batch in record:
         o, d, t, w = batch["o"], batch["d"], batch["t"], batch["w"]
-        h = t / SUBSTEPS
-        tr = np.ones((len(o), 3))
-        st_k, al_k, tr_k, pw_k = [], [], [], []
-        for k in range(SUBSTEPS):
-            st, al = _grid_lookup(scene.medium, o + ((k + 0.5) * h)[:, None] * d)
-            tk = np.exp(-st * h[:, None])
-            st_k.append(st)
-            al_k.append(al)
-            tr_k.append(tr.copy())
-            pw_k.append(w * tr * al * (1.0 - tk))
-            tr = tr * tk
-        segs.append((batch, h, np.stack(st_k, 1), np.stack(al_k, 1), np.stack(tr_k, 1), np.stack(pw_k, 1)))
-    out = {"x": [], "W": [], "label": [], "verts": [], "light": [], "photon": []}
-    for batch, h, st, al, tr, pw in segs:
-        pbar = pw.mean(2)                                   # (m, S)
+        st, al, tr, tk = (np.stack(a, 1) for a in zip(*substeps(scene.medium, o, d, t)))   # (m, S, 3) each
+        pbar = (w[:, None] * tr * al * (1.0 - tk)).mean(2)      # (m, S): sub-intervals' power, mean over channels
         seg_power = pbar.sum(1)
-        keep = seg_power > 0
-        if not keep.any():
+        idx = np.flatnonzero(seg_power > 0)
+        if not len(idx):
             continue
-        idx = np.flatnonzero(keep)
+        h = t[idx] / SUBSTEPS
         q = pbar[idx] / seg_power[idx, None]
         k = np.minimum((q.cumsum(1) < rng.random(len(idx))[:, None]).sum(1), SUBSTEPS - 1)
         qk = q[np.arange(len(idx)), k]
-        u = rng.random(len(idx)) * h[idx]
-        s = (k + u / h[idx]) * h[idx]
+        u = rng.random(len(idx)) * h
         stk, alk, trk = st[idx, k], al[idx, k], tr[idx, k]
-        W = batch["w"][idx] * trk * alk * stk * np.exp(-stk * u[:, None]) * h[idx, None] / qk[:, None]
-        out["x"].append(batch["o"][idx] + s[:, None] * batch["d"][idx])
-        out["W"].append(W)
+        out["W"].append(w[idx] * trk * alk * stk * np.exp(-stk * u[:, None]) * h[:, None] / qk[:, None])   # (C1)
+        out["x"].append(o[idx] + (k * h + u)[:, None] * d[idx])
         out["label"].append(batch["label"][idx])
         out["verts"].extend(batch["verts"][idx])
         out["light"].append(np.full(len(idx), batch["light"]))
@@ -132,7 +117,6 @@ def covered(scene, pts, seed=0, variant="llvm_ad_rgb", loaded=None):
     mi, dr, mscene = loaded or connection_power._load(scene, variant, None)
     integ = mscene.integrator()
     integ._prepare(mscene)
-    medium = mscene.shapes()[0].interior_medium()
     emitter_of = _emitter_indices(mi, mscene, scene)
     hit = np.zeros(len(pts["x"]), bool)
     labels = pts["label"]
@@ -140,18 +124,14 @@ def covered(scene, pts, seed=0, variant="llvm_ad_rgb", loaded=None):
         idx = np.flatnonzero(labels == label)
         kinds = kinds_of(label)
         n = len(idx)
-        x = pts["x"][idx]
-        x0 = mi.Point3f(*[mi.Float(x[:, i].astype(np.float32)) for i in range(3)])
-        mei = dr.zeros(mi.MediumInteraction3f, n)
-        active = dr.full(mi.Bool, True, n)
-        mei.p, mei.t, mei.medium = x0, mi.Float(0.0), dr.select(active, medium, dr.zeros(mi.MediumPtr))
+        mei, _ = connection_power.medium_vertices(mi, dr, mscene, pts["x"][idx], np.ones(n, bool))
+        x0, active = mei.p, dr.full(mi.Bool, True, n)
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(seed + int(idx[0]), n)
         emitter = dr.gather(mi.EmitterPtr, mscene.emitters_dr(), mi.UInt32(emitter_of[pts["light"][idx]]))
         s = integ._seeded(mscene, sampler, mei, mei.medium, active, mi.UInt32(0), emitter, sampler.next_2d(), 1.0)
         verts = np.stack([pts["verts"][i] for i in idx])[:, ::-1]          # from x0: the events reversed
-        ref = [mi.Point3f(*[mi.Float(verts[:, j, i].astype(np.float32)) for i in range(3)])
-               for j in range(len(kinds))]
+        ref = [connection_power.point3f(mi, verts[:, j]) for j in range(len(kinds))]
         found = dr.full(mi.Bool, False, n)
         excluded = dr.full(mi.Bool, False, n)
         if set(kinds) == {"T"} and len(kinds) in s["connected"]:
@@ -203,16 +183,17 @@ def _batch(scene, photons, seed, variant, loaded):
 
 
 def _ratio(batches):
-    """Eq. C2 pooled over batches, and its standard error by the delta method over photons (a photon with no
-    point adds zeros to both sums)."""
+    """Eq. C2 pooled over batches, its standard error by the delta method over photons (a photon with no point adds
+    zeros to both sums), the whole weight (safe to divide by), and the heaviest photon's share of the missed."""
     a = np.concatenate([x[0] for x in batches])
     b = np.concatenate([x[1] for x in batches])
     n = sum(x[2] for x in batches)
-    total = b.sum(0)
+    total, missed = b.sum(0), a.sum(0)
     safe = np.where(total > 0, total, 1.0)
-    m = a.sum(0) / safe
+    m = missed / safe
     se = np.sqrt(np.square(a - m * b).sum(0) * n / max(n - 1, 1)) / safe
-    return m, se, safe
+    heaviest = np.where(missed > 0, a.max(0) / np.where(missed > 0, missed, 1.0), 0.0)
+    return m, se, safe, heaviest
 
 
 def missed(scene, photons=PHOTONS, seed=0, variant="llvm_ad_rgb", limit=None, max_photons=MAX_PHOTONS,
@@ -234,16 +215,14 @@ def missed(scene, photons=PHOTONS, seed=0, variant="llvm_ad_rgb", limit=None, ma
     batches = [_batch(scene, photons, seed, variant, loaded)]
 
     def undecided():
-        m, se, _ = _ratio(batches)
+        m, se, _, _ = _ratio(batches)
         open_ = (m - DECIDED_SE * se <= limit) & (m + DECIDED_SE * se > limit)
         return bool(np.any(open_))
 
     while limit is not None and (len(batches) + 1) * photons <= max_photons and (
             len(batches) * photons < min(min_photons, max_photons) or undecided()):
         batches.append(_batch(scene, photons, seed + 1000 * len(batches), variant, loaded))
-    m, se, safe = _ratio(batches)
-    a = np.concatenate([x[0] for x in batches])
-    heaviest = np.where(a.sum(0) > 0, a.max(0) / np.where(a.sum(0) > 0, a.sum(0), 1.0), 0.0)
+    m, se, safe, heaviest = _ratio(batches)
     by_label = {}
     for label in sorted({k for x in batches for k in x[3]}):
         w = sum(x[3][label][0] for x in batches if label in x[3])

@@ -284,7 +284,7 @@ def verdict(losses, target_rel_se):
     _, se = _decided(losses, name)
     fs = losses.get("first_scatter")
     refl = f", {fs['reflection_share']['RGB'.index(name)]:.2%} of it through reflections" if fs else ""
-    fs = _missed_route(losses)
+    route = _missed_route(losses)
     pm = f" ± {se:.2%}" if se else ""
     if loss + DECIDED_SE * se <= limit:
         return True, (f"exact: the connections miss an estimated {loss:.2%}{pm} ({which}, channel {name}), at most "
@@ -292,7 +292,7 @@ def verdict(losses, target_rel_se):
     if loss - DECIDED_SE * se <= limit:
         return False, (f"not exact (undecided): the connections miss an estimated {loss:.2%}{pm} ({which}, channel "
                        f"{name}{refl}), within {DECIDED_SE:g} standard errors of {LOSS_FRACTION_OF_TARGET:g} x the "
-                       f"noise target ({limit:.2%}) after {fs['points'] if fs else 0} points")
+                       f"noise target ({limit:.2%}) after {route['points'] if route else 0} points")
     return False, (f"not exact: the connections miss an estimated {loss:.2%}{pm} ({which}, channel {name}{refl}; "
                    f"connections not made {ch['lost']:.2%}, {ch['over_max']:.2%} over max_crossings = "
                    f"{losses['max_crossings']}), more than {LOSS_FRACTION_OF_TARGET:g} x the noise target "

@@ -144,17 +144,25 @@ def _grid_lookup(medium, x):
     return st[i[:, 2], i[:, 1], i[:, 0]], al[i[:, 2], i[:, 1], i[:, 0]]
 
 
-def _segment(medium, o, d, length):
-    """First-scattered power per unit weight along each segment, and its transmittance (module docstring)."""
-    dep = np.zeros((len(o), 3))
+def substeps(medium, o, d, length):
+    """The first-scattering integral's sub-intervals along each segment, one at a time (module docstring): yields
+    ``(sigma_t, albedo, tr, tk)`` (each (m, 3)): the nearest voxel's values at the sub-interval's midpoint, the
+    transmittance to its start and across it; its first-scattered power per unit weight is ``tr albedo (1 - tk)``."""
     tr = np.ones((len(o), 3))
     h = length / SUBSTEPS
     for k in range(SUBSTEPS):
         st, al = _grid_lookup(medium, o + ((k + 0.5) * h)[:, None] * d)
         tk = np.exp(-st * h[:, None])
+        yield st, al, tr, tk
+        tr = tr * tk
+
+
+def _segment(medium, o, d, length):
+    """First-scattered power per unit weight along each segment, and its transmittance (module docstring)."""
+    dep = np.zeros((len(o), 3))
+    for _, al, tr, tk in substeps(medium, o, d, length):
         dep += tr * al * (1.0 - tk)
-        tr *= tk
-    return dep, tr
+    return dep, tr * tk
 
 
 def _cone_directions(apex, center, radius, n, rng):
@@ -208,7 +216,7 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0, record=None):
         inside = np.zeros(photons, bool)
         labels = np.array([""] * photons, dtype=object)
         pid = np.arange(photons)                 # the photon each branch came from
-        hist = np.zeros((photons, 0, 3))         # each branch's boundary events so far (with ``record``)
+        hist = None if record is None else np.zeros((photons, 0, 3))   # each branch's boundary events so far
         per_photon = np.zeros((photons, 3))
         for event in range(max_events + 1):
             if len(o) == 0:                      # every branch escaped or was cut (Dr.Jit refuses empty casts)
@@ -218,13 +226,15 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0, record=None):
             # offset beyond a thin part): dropped, its weight reported as leaked.
             leaked += w[inside & ~valid].sum(0)
             keep = valid
-            o, d, w, w0, inside, labels, t, p, n, ng, pid, hist = (
-                a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, ng, pid, hist))
-            if inside.any() and record is not None:
-                record.append({"o": o[inside], "d": d[inside], "t": t[inside], "w": w[inside],
-                               "label": labels[inside], "verts": hist[inside], "pid": pid[inside],
-                               "light": light_index})
+            o, d, w, w0, inside, labels, t, p, n, ng, pid = (a[keep] for a in (o, d, w, w0, inside, labels, t, p, n, ng,
+                                                                             pid))
+            if record is not None:
+                hist = hist[keep]
             if inside.any():
+                if record is not None:
+                    record.append({"o": o[inside], "d": d[inside], "t": t[inside], "w": w[inside],
+                                   "label": labels[inside], "verts": hist[inside], "pid": pid[inside],
+                                   "light": light_index})
                 dep, tr = _segment(scene.medium, o[inside], d[inside], t[inside])
                 power = w[inside] * dep
                 np.add.at(per_photon, pid[inside], power)
@@ -260,8 +270,9 @@ def trace(scene, eta=None, photons=1 << 18, max_events=8, seed=0, record=None):
                                      labels[mt] + event_letter(inside[mt], in_t[mt])])
             inside = np.concatenate([in_r[mr], in_t[mt]])
             pid = np.concatenate([pid[mr], pid[mt]])
-            hist = np.concatenate([np.concatenate([hist[mr], p[mr, None]], 1),
-                                   np.concatenate([hist[mt], p[mt, None]], 1)])
+            if record is not None:
+                hist = np.concatenate([np.concatenate([hist[mr], p[mr, None]], 1),
+                                       np.concatenate([hist[mt], p[mt, None]], 1)])
         # The directions are stratified (one per ring of the cone): the variance of the sum by collapsed
         # strata, each pair of neighbouring rings one stratum of two samples (conservative).
         half = photons // 2

@@ -31,7 +31,7 @@ REFERENCE = (
              "the seconds per sample of a split reference count the sampled part's pass at every sample, so a "
              "capped render plans too few samples"),
     Mutation("coverage_point_weight_without_choice", "mitsuba", "harness/reference/coverage.py",
-             "* h[idx, None] / qk[:, None]", "* h[idx, None]",
+             "* h[:, None] / qk[:, None])", "* h[:, None])",
              (f"{CV}::test_points_carry_the_traced_power",),
              "a first-scatter point's weight is not divided by the probability of its sub-interval, so the points "
              "carry a fraction of the traced power and the share missed is weighed by the wrong light"),
