@@ -29,7 +29,7 @@ from harness.reference import mitsuba_scene as ms
 from harness.reference.render import render_reference
 from harness.scene import load_scene
 
-SCENES = ("skin_torus_dielectric", "validation_scenes/bunny_dielectric")
+SCENES = ("skin_torus_dielectric", "bunny_dielectric")
 K = 8
 #: The two renders' seeds: disjoint, so that their noise figures are independent.
 SEED_BASES = (100, 1100)

@@ -27,7 +27,7 @@ paths with a reflection) against what ``mneevolpath``'s connections deliver
 seed segment (``stats``, at ``--size``), and, when ``torus_hole`` is among them, the area-light limit
 at each ``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
 ``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`) for the default scenes and
-``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes validation_scenes/bunny_dielectric``).
+``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes bunny_dielectric``).
 
 Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
 ``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``

@@ -12,7 +12,7 @@ is ``E`` where it enters the medium); the single refraction and the sampled ``T`
 straight-seeded chains and the sampled ``TTT`` both ``ETE``. Beside each delivery: its wall time over the
 delivery without sampling, measured in the same run (each after a small delivery that compiles its kernels).
 
-Usage: ``.venv/bin/python benchmarks/mnee_sms.py [--scenes torus_hole validation_scenes/bunny_dielectric]``
+Usage: ``.venv/bin/python benchmarks/mnee_sms.py [--scenes torus_hole bunny_dielectric]``
 ``[--trials 64 1024] [--chains T,RT,Tr,TTT,RRT] [--points 131072] [--photons 65536] [--write]``.
 """
 
@@ -56,7 +56,7 @@ def main():
     from harness.reference import connection_power, specular_paths
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=["torus_hole", "validation_scenes/bunny_dielectric"])
+    ap.add_argument("--scenes", nargs="+", default=["torus_hole", "bunny_dielectric"])
     ap.add_argument("--trials", type=int, nargs="+", default=[64, 1024])
     ap.add_argument("--chains", default="T,RT,Tr,TTT,RRT")
     ap.add_argument("--points", type=int, default=1 << 17)

@@ -13,7 +13,7 @@ and with the standard error of the runs' spread; and the share of the light of t
 carried by the top :data:`TOP` of the pooled points. A spread larger than the runs' own standard errors, or a top share
 far above :data:`TOP`, says that a single run's standard error understates its error.
 
-Usage: ``.venv/bin/python benchmarks/mnee_sms_spread.py [--scenes validation_scenes/bunny_dielectric]``
+Usage: ``.venv/bin/python benchmarks/mnee_sms_spread.py [--scenes bunny_dielectric]``
 ``[--trials 256] [--chains T,RT,Tr,TTT] [--seeds 4] [--points 524288] [--photons 1048576] [--write]``.
 """
 
@@ -49,7 +49,7 @@ def main():
     from harness.reference import connection_power, specular_paths
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=["validation_scenes/bunny_dielectric"])
+    ap.add_argument("--scenes", nargs="+", default=["bunny_dielectric"])
     ap.add_argument("--trials", type=int, default=256)
     ap.add_argument("--chains", default=None, help="sms_chains (default: the scene's)")
     ap.add_argument("--seeds", type=int, default=4)

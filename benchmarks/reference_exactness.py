@@ -1,8 +1,7 @@
 """The exactness verdict on every smooth-dielectric scene: as its committed reference was rendered, and sampled.
 
 For each scene (``--scenes``; by default every suite scene behind a smooth dielectric, and the
-non-convex validation scenes: :func:`harness.reference.nonconvex.torus_hole` and
-``validation_scenes/bunny_dielectric``), :func:`harness.reference.losses.first_scatter` and
+non-convex validation scene :func:`harness.reference.nonconvex.torus_hole`), :func:`harness.reference.losses.first_scatter` and
 :func:`harness.reference.losses.verdict` against the scene's small-reference noise target, with the
 reference's connections set three ways:
 
@@ -37,15 +36,21 @@ from harness.paths import REPO
 from harness.reference import coverage, losses
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
-from harness.scene import load_scene, scene_hash
+from harness.scene import list_scenes, load_scene, scene_hash
 
-SUITE_DIELECTRIC = ("skin_torus_dielectric", "jade_backlit_dielectric")
-VALIDATION = ("torus_hole", "validation_scenes/bunny_dielectric")
+VALIDATION = ("torus_hole",)
+
 WAYS = ("committed", "chains", "sampled")
 #: The chains sampled where the scene names none: on the torus lit through its hole, light that enters and
 #: reflects two to four times inside (``ERR``, ``ERRR``, ``ERRRR``: ``docs/benchmarks/mnee_sms.md`` names the
 #: last two among the largest labels no default chain delivers, 0.8 % of the red light together) too.
 SAMPLED_CHAINS = {"torus_hole": "T,RT,Tr,TTT,RRT,RRRT,RRRRT"}
+
+
+def suite_dielectric():
+    """The suite's scenes behind a smooth dielectric boundary."""
+    return [n for n in list_scenes()
+            if load_scene(n).boundary.kind == "dielectric" and load_scene(n).boundary.roughness == 0.0]
 
 
 def scene_named(name):
@@ -80,7 +85,7 @@ def main():
     from page import Page
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=list(SUITE_DIELECTRIC + VALIDATION))
+    ap.add_argument("--scenes", nargs="+", default=suite_dielectric() + list(VALIDATION))
     ap.add_argument("--trials", type=int, default=256)
     ap.add_argument("--chains", default=None, help="sms_chains for the sampled way (default: the scene's)")
     ap.add_argument("--ways", nargs="+", choices=WAYS, default=list(WAYS))

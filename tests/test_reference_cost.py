@@ -135,7 +135,7 @@ def test_a_sampling_cap_beyond_the_measured_references_is_called_a_floor():
 
     per_channel = {"refs": {"a": {"integrator": {c: {"type": "mneevolpath", "sms_trials": 256} for c in "RGB"}},
                             "b": {"integrator": {"type": "volpath"}}}}
-    bunny = load_scene("validation_scenes/bunny_dielectric")
+    bunny = load_scene("bunny_dielectric")
     at = lambda n: dataclasses.replace(bunny, boundary=dataclasses.replace(bunny.boundary, sms_trials=n))  # noqa: E731
     assert cost.outside_the_fit(at(256), per_channel) == []
     assert cost.outside_the_fit(at(0), per_channel) == []

@@ -74,9 +74,29 @@ class TestSuite:
     def test_suite_covers_the_issue(self):
         tags = {t for n in list_scenes() for t in load_scene(n).tags}
         assert {"homogeneous", "heterogeneous", "coloured", "back-lit", "low-albedo", "anisotropic",
-                "two-lights", "thin"} <= tags
+                "two-lights", "thin", "scanned", "measured"} <= tags
         mixed = load_scene("mixed_phase").medium.g
         assert mixed.max() == pytest.approx(0.8) and mixed.min() == pytest.approx(-0.3)
+
+
+class TestScannedMesh:
+    """The suite's scanned mesh (``bunny_dielectric``) is the one its recipe describes (``reference_scenes/README.md``,
+    "The scanned mesh")."""
+
+    @staticmethod
+    def _edge_uses(faces):
+        e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        return np.unique(e, axis=0, return_counts=True)[1]
+
+    def test_closed_two_manifold_genus_0(self):
+        """4,000 faces (the recipe's target), every edge shared by exactly two triangles, genus 0 (Euler
+        characteristic 2), behind a smooth dielectric."""
+        scene = load_scene("bunny_dielectric")
+        faces = np.asarray(scene.mesh.faces)
+        uses = self._edge_uses(faces)
+        assert np.all(uses == 2), "every edge of a closed two-manifold mesh has exactly two triangles"
+        assert len(faces) == 4000 and len(np.unique(faces)) - len(uses) + len(faces) == 2
+        assert scene.boundary.kind == "dielectric" and scene.boundary.roughness == 0.0
 
 
 class TestBadScenes:

@@ -81,6 +81,25 @@ def test_a_split_out_of_range_or_without_sampling_is_refused(split, why):
     assert "\n" not in str(exc.value) and "sms_split" in str(exc.value)
 
 
+def test_regenerate_applies_the_split_to_the_scenes_that_sample(monkeypatch, capsys):
+    """``baselines regenerate-references --sms-split N`` over several scenes passes the split to those that sample
+    (bunny_dielectric: ``sms_trials`` 4096) and renders the others in one pass; named only for scenes that do not
+    sample, it is refused in one line, before anything renders."""
+    pytest.importorskip("harness.reference.mitsuba_scene")
+    from harness.cli import main
+    from harness.regression import baselines
+
+    got = {}
+    monkeypatch.setattr(baselines, "regenerate_reference", lambda n, **kw: got.setdefault(n, kw["sms_split"]))
+    argv = ["baselines", "regenerate-references", "--serial", "--no-progress", "--sms-split", "4", "--scenes"]
+    assert main(argv + ["jade_veins,bunny_dielectric"]) == 0
+    assert got == {"jade_veins": None, "bunny_dielectric": 4}
+    got.clear()
+    assert main(argv + ["jade_veins"]) == 2 and not got
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and err[0].startswith("error: --sms-split: sms_split: none of the scenes"), err
+
+
 def test_sms_only_without_sampling_is_refused():
     ms = pytest.importorskip("harness.reference.mitsuba_scene")
     from harness.reference import halfspace

@@ -193,7 +193,7 @@ def test_no_light_scatters_outside_the_mesh(mi, monkeypatch):
     from harness.reference import connection_power, specular_paths
     from harness.scene import load_scene
 
-    scene = load_scene("validation_scenes/bunny_dielectric")
+    scene = load_scene("bunny_dielectric")
     caster = mi.load_dict({"type": "scene", "o": ms.mitsuba_mesh(scene.mesh)})
     segment = specular_paths._segment
     counted = {"outside": 0, "segments": 0}

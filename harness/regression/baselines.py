@@ -458,13 +458,22 @@ def run_baselines_cli(args):
     names = resolve_scenes(args.scenes) if args.scenes else list_scenes()
     if args.into and len(names) != 1:
         raise InputError("--into", "into", f"needs exactly one scene, got {len(names)}", "add --scenes NAME")
+    from harness.reference.jobs import RenderSetup
     from harness.runs.references import _client
 
+    # --sms-split applies to the scenes that sample specular manifolds; over several scenes the others
+    # render one pass, as they would without it. Named for scenes of which none samples, it is refused.
+    samples = {n: RenderSetup(load_scene(n)).samples_manifolds for n in names}
+    if args.sms_split is not None and args.sms_split > 1 and not any(samples.values()):
+        raise InputError("--sms-split", "sms_split", f"none of the scenes ({', '.join(names)}) samples specular "
+                         "manifolds ([boundary] sms_trials > 0 behind a smooth dielectric)",
+                         "leave --sms-split out, or name a scene that samples")
     # On a LocalCluster by default (--scheduler: an existing one; --serial: in this process).
     client, cluster, threads = _client(args.scheduler, args.workers, args.serial)
     try:
         out = [regenerate_reference(n, into=args.into, client=client, threads=threads,
-                                    progress=args.progress and not args.json, sms_split=args.sms_split)
+                                    progress=args.progress and not args.json,
+                                    sms_split=args.sms_split if samples[n] else None)
                for n in names]
     finally:
         if client is not None:

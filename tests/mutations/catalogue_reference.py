@@ -16,6 +16,16 @@ REFERENCE = (
              (f"{ST}::test_a_seed_image_is_the_sum_of_its_parts",),
              "a split reference's seed image leaves out the sampled solutions' part, so the reference is darker "
              "by their light"),
+    Mutation("regenerate_split_to_every_scene", "mitsuba", "harness/regression/baselines.py",
+             "sms_split=args.sms_split if samples[n] else None)", "sms_split=args.sms_split)",
+             (f"{ST}::test_regenerate_applies_the_split_to_the_scenes_that_sample",),
+             "regenerate-references --sms-split over several scenes hands the split to a scene that does not "
+             "sample, which refuses it, so the command stops at the first such scene"),
+    Mutation("reference_chromatic_in_one_pass", "mitsuba", "harness/reference/mitsuba_scene.py",
+             "return (None,) if np.all(st == st[..., :1]) else (0, 1, 2)", "return (None,)",
+             ("tests/test_mnee_chain.py::test_eta_one_on_the_scanned_bunny_reproduces_index_matched_volpath",),
+             "a chromatic medium's reference is rendered in one RGB pass, where volpath's spectral weights are "
+             "heavy-tailed in the channel whose paths are longest (red through the scanned bunny)"),
     Mutation("sms_only_keeps_the_rest", "mitsuba", "harness/reference/mnee.py",
              "rest = 0.0 if self.sms_only else 1.0", "rest = 1.0",
              (f"{ST}::test_the_split_parts_add_up_to_the_whole",),

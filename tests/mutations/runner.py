@@ -33,7 +33,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 #: What a copy holds (everything a test selection may read).
-COPY_DIRS = ("harness", "sslpv_gl", "dipole_gl", "tests", "reference_scenes", "validation_scenes", "baselines", "benchmarks",
+COPY_DIRS = ("harness", "sslpv_gl", "dipole_gl", "tests", "reference_scenes", "baselines", "benchmarks",
              "docs")
 COPY_FILES = ("pyproject.toml",)
 _IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache", "test-artifacts", "refs_reseeded")

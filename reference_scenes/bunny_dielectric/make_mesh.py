@@ -1,6 +1,6 @@
 """Make ``bunny.ply`` (this folder) from the Stanford bunny's ``bun_zipper.ply``.
 
-    python validation_scenes/bunny_dielectric/make_mesh.py path/to/bun_zipper.ply
+    python reference_scenes/bunny_dielectric/make_mesh.py path/to/bun_zipper.ply
 
 The original (35,947 vertices, 69,451 faces, 5 holes, 1,113 unreferenced vertices) is
 closed, decimated to about 4,000 faces and written as a binary PLY of vertex positions and
