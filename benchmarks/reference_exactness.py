@@ -49,8 +49,7 @@ SAMPLED_CHAINS = {"torus_hole": "T,RT,Tr,TTT,RRT,RRRT,RRRRT"}
 
 def suite_dielectric():
     """The suite's scenes behind a smooth dielectric boundary."""
-    return [n for n in list_scenes()
-            if load_scene(n).boundary.kind == "dielectric" and load_scene(n).boundary.roughness == 0.0]
+    return [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
 
 
 def scene_named(name):
