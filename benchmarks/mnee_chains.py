@@ -27,7 +27,8 @@ paths with a reflection) against what ``mneevolpath``'s connections deliver
 seed segment (``stats``, at ``--size``), and, when ``torus_hole`` is among them, the area-light limit
 at each ``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
 ``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`) for the default scenes and
-``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes bunny_dielectric``).
+``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes bunny_dielectric``). The other runs'
+``--write`` writes their printout to ``mnee_chains_eta_one.md`` or ``mnee_chains_area_limit.md``.
 
 Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
 ``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``
@@ -299,8 +300,19 @@ def area_limit(mi, args):
               f"+- {fmt(se)}")
 
 
+def printout_page(argv):
+    """The page of a run whose figures are its printout (:func:`page.run`); None for ``--decompose``, which
+    writes its own page (:func:`page_name`), so that the two never write the same file."""
+    if "--decompose" in argv:
+        return None
+    return "mnee_chains_area_limit" if "--area-limit" in argv else "mnee_chains_eta_one"
+
+
 if __name__ == "__main__":
+    import sys
+
     from page import run
 
-    raise SystemExit(run(main, lambda argv: "mnee_chains_area_limit" if "--area-limit" in argv else "mnee_chains",
-                         "Connections through several interfaces"))
+    if printout_page(sys.argv[1:]) is None:
+        raise SystemExit(main())
+    raise SystemExit(run(main, printout_page, "Connections through several interfaces"))

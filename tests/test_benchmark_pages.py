@@ -165,3 +165,17 @@ def test_bench_sslpv_gpu_refuses_a_software_renderer(gl_renderer):
     assert out.stderr.splitlines()[0].startswith("error: --gpu: GL_RENDERER: ")
     assert "is a software renderer" in out.stderr and out.stdout == ""
     assert (ROOT / "docs" / "benchmarks" / "bench_sslpv_gpu.md").read_bytes() == before
+
+
+def test_mnee_chains_runs_write_distinct_pages(monkeypatch):
+    """``mnee_chains.py``'s three kinds of run (the eta -> 1 printout, the area-light limit, ``--decompose``
+    over a scene set) write three different pages; ``--decompose`` writes its own page, not the printout's."""
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("bench_mnee_chains", ROOT / "benchmarks" / "mnee_chains.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    decompose = [mod.page_name(mod.SMOOTH_SCENES), mod.page_name(["bunny_dielectric"])]
+    printouts = [mod.printout_page([]), mod.printout_page(["--area-limit", "0.25"])]
+    assert mod.printout_page(["--decompose", "--scenes", "bunny_dielectric"]) is None
+    assert decompose == ["mnee_chains", "mnee_chains_bunny_dielectric"]
+    assert len(set(decompose + printouts)) == 4
