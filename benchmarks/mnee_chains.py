@@ -60,36 +60,6 @@ def render(mi, d, seeds, spp):
     return out, time.perf_counter() - t
 
 
-def _channel_aov_triples():
-    from harness.reference.mnee import STATS_AOVS
-
-    return [tuple(STATS_AOVS.index(f"{stem}_{c}") for c in "rgb") for stem in ("mnee_lost",)]
-
-
-def render_passes(mi, scene, seeds, spp, integrator=None):
-    """As the reference renders it (:func:`harness.reference.mitsuba_scene.channel_passes`): one RGB pass, or in
-    a chromatic medium one grey pass per channel of which that channel is kept (stock ``volpath``'s weights are
-    heavy-tailed across unequal channels). Returns the (seeds, H, W, 3 + AOVs) stack (counts averaged over the
-    passes, a channel's lost light from its own pass) and the time."""
-    passes = ms.channel_passes(scene.medium)
-    out, total = None, 0.0
-    for c in passes:
-        d = ms.build_scene_dict(scene, channel=c)
-        d["integrator"].update(integrator or {})
-        a, t = render(mi, d, seeds, spp)
-        total += t
-        if c is None:
-            return a, t
-        if out is None:
-            out = np.zeros_like(a)
-        out[..., c] = a[..., c]
-        out[..., 3:] += a[..., 3:] / len(passes)        # counts: the mean over the passes
-        for k in _channel_aov_triples() if a.shape[-1] > 3 else ():   # a channel's lost light: from its own pass
-            out[..., 3 + k[0]:3 + k[0] + 3] -= a[..., 3 + k[0]:3 + k[0] + 3] / len(passes)
-            out[..., 3 + k[c]] += a[..., 3 + k[c]]
-    return out, total
-
-
 def median_rel_se(stack, covered):
     """Median over covered, lit (pixel, channel) pairs of se / mean (K seeds)."""
     mean, se = stack.mean(0), stack.std(0, ddof=1) / np.sqrt(len(stack))
@@ -132,14 +102,14 @@ def main():
     smooth = dataclasses.replace(base, boundary=Boundary("dielectric", eta, 0.0))
     print(f"{args.scene} at {args.size} x {args.size}, K = {args.seeds} x {args.spp} spp each, eta = {eta}, "
           f"{len(ms.channel_passes(base.medium))} pass(es) as the reference renders them")
-    b, tb = render_passes(mi, matched, range(100, 100 + args.seeds), args.spp)
+    b, tb = ms.render_in_passes(mi, matched, range(100, 100 + args.seeds), args.spp)
     pb = b.mean((1, 2))
     covered = ms.coverage_mask(matched) >= 1.0
     rb = median_rel_se(b, covered)
     print(f"  index-matched volpath: {tb:.0f} s, image mean {fmt(pb.mean(0))}, median rel. SE {rb:.4f}")
     names = ["R", "G", "B"] + list(mnee.STATS_AOVS)
     for mc in args.max_crossings:
-        a, ta = render_passes(mi, smooth, range(args.seeds), args.spp, {"stats": True, "max_crossings": mc})
+        a, ta = ms.render_in_passes(mi, smooth, range(args.seeds), args.spp, {"stats": True, "max_crossings": mc})
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
         st = dict(zip(names[3:], aov))
         se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))

@@ -185,25 +185,6 @@ def test_eta_one_through_the_hole_reproduces_index_matched_volpath(mi):
     assert not results[1][0], "without chains the comparison must fail (the scene no longer tests them)"
 
 
-def render_as_the_reference(mi, scene, seeds, spp, integrator=None):
-    """The (seeds, H, W, 3 + AOVs) stack in the reference's passes (:func:`harness.reference.mitsuba_scene.channel_passes`):
-    one RGB pass, or in a chromatic medium one grey pass per channel, of which that channel is kept (stock
-    ``volpath``'s weights are heavy-tailed across unequal channels); the AOVs (counts) are the passes' mean."""
-    out = None
-    passes = ms.channel_passes(scene.medium)
-    for c in passes:
-        d = ms.build_scene_dict(scene, channel=c)
-        d["integrator"].update(integrator or {})
-        a = render_stack(mi, d, seeds, spp)
-        if c is None:
-            return a
-        if out is None:
-            out = np.zeros_like(a)
-        out[..., c] = a[..., c]
-        out[..., 3:] += a[..., 3:] / len(passes)
-    return out
-
-
 def eta_one_comparison(mi, smooth, matched, spp, crossings):
     """eta = 1.0001 (``smooth``, stats) against index-matched volpath (``matched``), K = 8 x ``spp`` each, per
     ``max_crossings`` in ``crossings``, both in the reference's passes.
@@ -219,11 +200,11 @@ def eta_one_comparison(mi, smooth, matched, spp, crossings):
     from harness.reference import mnee
     from harness.reference.noise import lit_mask
 
-    b = render_as_the_reference(mi, matched, range(100, 108), spp)
+    b, _ = ms.render_in_passes(mi, matched, range(100, 108), spp)
     lit_c = lit_mask(b.mean(0), ms.coverage_mask(matched))
     out = {}
     for mc in crossings:
-        a = render_as_the_reference(mi, smooth, range(8), spp, {"stats": True, "max_crossings": mc})
+        a, _ = ms.render_in_passes(mi, smooth, range(8), spp, {"stats": True, "max_crossings": mc})
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
         se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
         z = np.abs(img.mean(0) - b.mean(0)) / np.where(se > 0, se, np.inf)

@@ -468,3 +468,37 @@ def coverage_mask(scene, sub=4):
                    mi.Vector3f(*[mi.Float(flat[:, k]) for k in range(3)]))
     hit = np.asarray(mscene.ray_intersect(ray).is_valid(), dtype=bool)
     return hit.reshape(H, W, S).mean(axis=2).astype(np.float32)
+
+
+def render_in_passes(mi, scene, seeds, spp, integrator=None):
+    """``scene`` rendered as the reference renders it (:func:`channel_passes`), per seed: one RGB pass, or in a
+    chromatic medium one grey pass per channel of which that channel is kept. ``integrator``: settings added to the
+    scene's integrator (``stats``, ``max_crossings``). Returns the (seeds, H, W, 3 + AOVs) float64 stack and the
+    render seconds. AOVs of a split render: the passes' mean (counts), except a channel's lost light
+    (``mnee_lost_r/g/b``, :data:`harness.reference.mnee.STATS_AOVS`), which is taken from its own pass.
+
+    Limits: for comparisons (the eta -> 1 tests and benchmarks); the reference itself renders through
+    :mod:`harness.reference.jobs`, which also splits specular manifold sampling into a pass of its own."""
+    import time
+
+    passes, out, seconds = channel_passes(scene.medium), None, 0.0
+    for c in passes:
+        d = build_scene_dict(scene, channel=c)
+        d["integrator"].update(integrator or {})
+        mscene = mi.load_dict(d)
+        t = time.perf_counter()
+        a = np.stack([np.asarray(mi.render(mscene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
+        seconds += time.perf_counter() - t
+        if c is None:
+            return a, seconds
+        if out is None:
+            out = np.zeros_like(a)
+        out[..., c] = a[..., c]
+        out[..., 3:] += a[..., 3:] / len(passes)                 # counts: the mean over the passes
+        if a.shape[-1] > 3:                                      # a channel's lost light: from its own pass
+            from harness.reference.mnee import STATS_AOVS
+
+            lost = [3 + STATS_AOVS.index(f"mnee_lost_{k}") for k in "rgb"]
+            out[..., lost] -= a[..., lost] / len(passes)
+            out[..., lost[c]] += a[..., lost[c]]
+    return out, seconds
