@@ -46,8 +46,12 @@ has the wrong orientation (odd vertices leave, even ones enter) is halved.
 
 Limits: every vertex on the same shape (same medium and eta); internal reflections inside
 the chain (light reflected back and forth inside the second part) are not part of it; the
-walk finds the solution its straight seed leads to. Connections left out are counted and
-their light estimated by the caller (:mod:`harness.reference.mnee`).
+walk finds the solution its straight seed leads to. A seed segment that grazes a part of the object
+crosses the boundary beyond the critical angle, where no refraction chain lies near it (total internal
+reflection): its walk steps far off the seed and fails. On the scanned bunny (``bunny_dielectric``, eta
+1.3) nearly every seed through three crossings does, so no straight-seeded chain connects there; specular
+manifold sampling's ``TTT`` chains (:mod:`harness.reference.mnee_sms`) start from other seeds. Connections
+left out are counted and their light estimated by the caller (:mod:`harness.reference.mnee`).
 """
 
 from harness.reference.llvm import ensure_libllvm
