@@ -26,6 +26,13 @@ REFERENCE = (
              ("tests/test_mnee_chain.py::test_eta_one_on_the_scanned_bunny_reproduces_index_matched_volpath",),
              "a chromatic medium's reference is rendered in one RGB pass, where volpath's spectral weights are "
              "heavy-tailed in the channel whose paths are longest (red through the scanned bunny)"),
+    Mutation("chain_other_part_transparent", "mitsuba", "harness/reference/mnee_connect.py",
+             "            if inside:\n                tr *= self._ratio_track(medium, verts[i - 1][0], verts[i][0], sampler, conn)",
+             "            if False:\n                tr *= self._ratio_track(medium, verts[i - 1][0], verts[i][0], sampler, conn)",
+             ("tests/test_mnee_chain.py::test_eta_one_on_the_other_suite_smooth_scenes_reproduces_index_matched_volpath"
+              "[skin_torus_dielectric]",),
+             "a chain's light crosses the other part of the object (the skin torus's near side of the ring) without "
+             "its medium's transmittance"),
     Mutation("sms_only_keeps_the_rest", "mitsuba", "harness/reference/mnee.py",
              "rest = 0.0 if self.sms_only else 1.0", "rest = 1.0",
              (f"{ST}::test_the_split_parts_add_up_to_the_whole",),
