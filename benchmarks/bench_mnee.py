@@ -1,10 +1,14 @@
 """The exact smooth-dielectric reference (``mneevolpath``): agreement, limits, failures and cost.
 
-Parts (``--part``, default all but ``time``, ``rough`` and ``eta2``, which take longest):
+Parts (``--part``, default all but ``slab``, ``time``, ``rough`` and ``eta2``, which take longest):
 
 ``halfspace``   test 1 at a larger budget: single scattering in the validation half-space
                 (:mod:`harness.reference.halfspace`), eta 1.33 and 1.5, 32 x 32, K = 16 x 128
                 spp, against the NumPy route: z-statistics, image mean, planted errors.
+``slab``        the chains' test 2 at a larger budget: the half-space under a slab of the same medium
+                (air between; :data:`harness.reference.halfspace.SLAB_SETUP`), single scattering
+                through three interfaces, eta 1.33 and 1.5, 32 x 32, K = 16 x 128 spp, against the
+                NumPy route: z-statistics, image mean, two planted errors.
 ``eta1``        test 2: eta = 1.0001 against index-matched ``volpath`` (jade_veins, 32 x 32).
 ``area-limit``  test 3's sequence: stock ``volpath`` with a sphere light of radius r
                 (radiance I / (pi r^2)) behind the grey half-space over the point-light image,
@@ -74,6 +78,35 @@ def part_halfspace(mi, args):
         for name, wrong in (("no light-side Fresnel", halfspace.setup_image(scene, sub=4, fresnel_light=False)),
                             ("straight inverse square", halfspace.setup_image(scene, sub=4, geometry="straight")),
                             ("no eta^2 in G", ref / eta ** 2)):
+            zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
+            print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
+                  f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
+
+
+def part_slab(mi, args):
+    """Test 2 of the chains at a larger budget: the half-space under a slab of the same medium with air between
+    (:data:`harness.reference.halfspace.SLAB_SETUP`), single scattering through three interfaces against NumPy."""
+    setup = halfspace.SLAB_SETUP
+    print("chains, test 2: single scattering under the slab (three interfaces) against NumPy (32 x 32, "
+          "K = 16 x 128 spp, max_depth 6)")
+    for eta in (1.33, 1.5):
+        scene = halfspace.validation_scene(eta, size=32, setup=setup)
+        st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=6), range(16), 128)
+        mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
+        ref = halfspace.setup_image(scene, setup=setup, sub=6, nodes=64)
+        lit = np.all(se > 0, axis=-1)
+        z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
+        per_seed = st.mean((1, 2))
+        ratio = per_seed.mean(0) / ref.mean((0, 1))
+        ratio_se = per_seed.std(0, ddof=1) / np.sqrt(len(st)) / ref.mean((0, 1))
+        print(f"  eta {eta}: {secs:.0f} s; chains outside the slab's footprint {halfspace.slab_outside_share(scene):.1e} "
+              f"of the integral; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f} of {int(lit.sum())} pixels, "
+              f"max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean / NumPy {fmt(ratio)} "
+              f"+- {fmt(ratio_se)}; median pixel rel SE {np.median(se[lit] / mean[lit]):.4f}")
+        for name, wrong in (("middle Fresnel factor skipped",
+                             halfspace.setup_image(scene, setup=setup, sub=4, fresnel_count=2)),
+                            ("straight inverse square",
+                             halfspace.setup_image(scene, setup=setup, sub=4, geometry="straight"))):
             zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
             print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
                   f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
@@ -240,7 +273,7 @@ def part_eta2(mi, args):
         renderer.ctx.release()
 
 
-PARTS = {"halfspace": part_halfspace, "eta1": part_eta1, "area-limit": part_area_limit, "rough": part_rough,
+PARTS = {"halfspace": part_halfspace, "slab": part_slab, "eta1": part_eta1, "area-limit": part_area_limit, "rough": part_rough,
          "failures": part_failures, "time": part_time, "eta2": part_eta2}
 DEFAULT_PARTS = ["halfspace", "eta1", "area-limit", "failures"]
 

@@ -9,7 +9,8 @@ the share of pixels within 4 SE, the share of connections by the number of cross
 seed segment, and the light of the connections not made (the straight seed's index-matched
 light, ``mnee_lost_*``) as a share of the index-matched image.
 
-Scenes (``--scene``): ``torus_hole`` (skin_torus_dielectric's torus and light, whose light
+Scenes (``--scene``, one or more; by default ``torus_hole`` and every suite scene behind a smooth
+dielectric; one with ``--area-limit``, by default ``torus_hole``): ``torus_hole`` (skin_torus_dielectric's torus and light, whose light
 passes through the near side of the ring to reach the far side, with a thin medium: sigma_t
 1.5 / 2 / 3, albedo 0.9 / 0.85 / 0.8), or any suite scene name.
 
@@ -28,7 +29,8 @@ seed segment (``stats``, at ``--size``), and, when ``torus_hole`` is among them,
 at each ``--depths`` beside the shortfall the first-scatter figures predict for that depth. With
 ``--write`` it writes ``docs/benchmarks/mnee_chains.md`` (:mod:`page`) for the default scenes and
 ``mnee_chains_<scene names>.md`` for another set (e.g. ``--scenes bunny_dielectric``). The other runs'
-``--write`` writes their printout to ``mnee_chains_eta_one.md`` or ``mnee_chains_area_limit.md``.
+``--write`` writes their printout to ``mnee_chains_eta_one[_<scenes>].md`` (by the scenes named; none for
+the default set) or ``mnee_chains_area_limit.md``.
 
 Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size 32] [--spp 64] [--seeds 4]``
 ``[--area-limit 0.25 --eta 1.4 --max-depth 6 --area-spp 16384]``
@@ -37,6 +39,7 @@ Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
@@ -44,7 +47,7 @@ import numpy as np
 
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
-from harness.scene import Boundary, load_scene
+from harness.scene import Boundary, list_scenes, load_scene
 
 SMOOTH_SCENES = ("torus_hole", "skin_torus_dielectric", "jade_backlit_dielectric")
 
@@ -73,7 +76,9 @@ def fmt(a, digits=4):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scene", default="torus_hole")
+    ap.add_argument("--scene", nargs="+", default=None,
+                    help="one scene or more (default: torus_hole and every suite smooth-dielectric scene; with "
+                         "--area-limit one, default torus_hole)")
     ap.add_argument("--size", type=int, default=32)
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seeds", type=int, default=4)
@@ -93,14 +98,25 @@ def main():
     if args.decompose:
         return decompose(mi, args)
     if args.area_limit is not None:
+        args.scene = args.scene or ["torus_hole"]
+        if len(args.scene) != 1:
+            print(f"error: --scene: scene: --area-limit takes one scene, not {len(args.scene)}; name one", file=sys.stderr)
+            return 2
         return area_limit(mi, args)
+    smooth = [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
+    for name in args.scene or ["torus_hole", *smooth]:
+        eta_one(mi, args, name)
+
+
+def eta_one(mi, args, name):
+    """eta = 1.0001 against index-matched volpath on the scene ``name``, with and without chains (docstring)."""
     from harness.reference import mnee
 
-    base = scene_named(args.scene).with_resolution(args.size, args.size)
+    base = scene_named(name).with_resolution(args.size, args.size)
     matched = dataclasses.replace(base, boundary=Boundary("index-matched"))
     eta = base.boundary.eta if args.eta == "own" else float(args.eta)
     smooth = dataclasses.replace(base, boundary=Boundary("dielectric", eta, 0.0))
-    print(f"{args.scene} at {args.size} x {args.size}, K = {args.seeds} x {args.spp} spp each, eta = {eta}, "
+    print(f"{name} at {args.size} x {args.size}, K = {args.seeds} x {args.spp} spp each, eta = {eta}, "
           f"{len(ms.channel_passes(base.medium))} pass(es) as the reference renders them")
     b, tb = ms.render_in_passes(mi, matched, range(100, 100 + args.seeds), args.spp)
     pb = b.mean((1, 2))
@@ -240,10 +256,10 @@ def decompose(mi, args):
 
 def area_limit(mi, args):
     r, md = args.area_limit, args.max_depth
-    scene = dataclasses.replace(scene_named(args.scene).with_resolution(args.size, args.size),
+    scene = dataclasses.replace(scene_named(args.scene[0]).with_resolution(args.size, args.size),
                                 boundary=Boundary("dielectric", float(args.eta), 0.0))
     light = scene.lights[0]
-    print(f"area-light limit, {args.scene} at {args.size} x {args.size}, eta {args.eta}, max_depth {md}, "
+    print(f"area-light limit, {args.scene[0]} at {args.size} x {args.size}, eta {args.eta}, max_depth {md}, "
           f"sphere light r = {r}: K = {args.seeds} x {args.area_spp} spp (full and absorber), point K = "
           f"{args.seeds} x {args.spp}")
     area = ms.area_light_limit(light.position, light.intensity, r, md)
@@ -275,12 +291,17 @@ def printout_page(argv):
     writes its own page (:func:`page_name`), so that the two never write the same file."""
     if "--decompose" in argv:
         return None
-    return "mnee_chains_area_limit" if "--area-limit" in argv else "mnee_chains_eta_one"
+    if "--area-limit" in argv:
+        return "mnee_chains_area_limit"
+    scenes = []
+    for a in argv[argv.index("--scene") + 1:] if "--scene" in argv else []:
+        if a.startswith("-"):
+            break
+        scenes.append(a)
+    return "_".join(["mnee_chains_eta_one", *scenes])
 
 
 if __name__ == "__main__":
-    import sys
-
     from page import run
 
     if printout_page(sys.argv[1:]) is None:

@@ -168,14 +168,18 @@ def test_bench_sslpv_gpu_refuses_a_software_renderer(gl_renderer):
 
 
 def test_mnee_chains_runs_write_distinct_pages(monkeypatch):
-    """``mnee_chains.py``'s three kinds of run (the eta -> 1 printout, the area-light limit, ``--decompose``
-    over a scene set) write three different pages; ``--decompose`` writes its own page, not the printout's."""
+    """``mnee_chains.py``'s three kinds of run (the eta -> 1 printout by its scenes, the area-light limit,
+    ``--decompose`` over a scene set) write different pages; ``--decompose`` writes its own page, not the
+    printout's."""
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location("bench_mnee_chains", ROOT / "benchmarks" / "mnee_chains.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     decompose = [mod.page_name(mod.SMOOTH_SCENES), mod.page_name(["bunny_dielectric"])]
-    printouts = [mod.printout_page([]), mod.printout_page(["--area-limit", "0.25"])]
+    printouts = [mod.printout_page([]), mod.printout_page(["--area-limit", "0.25"]),
+                 mod.printout_page(["--scene", "torus_hole", "bunny_dielectric", "--size", "32"])]
     assert mod.printout_page(["--decompose", "--scenes", "bunny_dielectric"]) is None
+    assert printouts[0] == "mnee_chains_eta_one"
+    assert printouts[2] == "mnee_chains_eta_one_torus_hole_bunny_dielectric"
     assert decompose == ["mnee_chains", "mnee_chains_bunny_dielectric"]
-    assert len(set(decompose + printouts)) == 4
+    assert len(set(decompose + printouts)) == 5
