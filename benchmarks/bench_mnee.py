@@ -60,27 +60,34 @@ def fmt(a, digits=4):
 
 # --------------------------------------------------------------------------- parts
 
+def against_numpy(mi, scene, max_depth, ref, planted, note=""):
+    """Render ``scene`` (K = 16 x 128 spp, ``max_depth``) and print its agreement with the NumPy image ``ref``
+    (z-statistics over the pixels with noise, the image mean ratio) and how far each planted error's image lies."""
+    st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=max_depth), range(16), 128)
+    mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
+    lit = np.all(se > 0, axis=-1)
+    z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
+    per_seed = st.mean((1, 2))
+    ratio = per_seed.mean(0) / ref.mean((0, 1))
+    ratio_se = per_seed.std(0, ddof=1) / np.sqrt(len(st)) / ref.mean((0, 1))
+    print(f"  eta {scene.boundary.eta}: {secs:.0f} s; {note}within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f} of "
+          f"{int(lit.sum())} pixels, max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean / NumPy "
+          f"{fmt(ratio)} +- {fmt(ratio_se)}; median pixel rel SE {np.median(se[lit] / mean[lit]):.4f}")
+    for name, wrong in planted.items():
+        zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
+        print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
+              f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
+
+
 def part_halfspace(mi, args):
     print("test 1: single scattering in the half-space against NumPy (32 x 32, K = 16 x 128 spp)")
     for eta in (1.33, 1.5):
         scene = halfspace.validation_scene(eta, size=32)
-        st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=4), range(16), 128)
-        mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
         ref = halfspace.setup_image(scene, sub=6, nodes=64)
-        lit = np.all(se > 0, axis=-1)
-        z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
-        per_seed = st.mean((1, 2))
-        ratio = per_seed.mean(0) / ref.mean((0, 1))
-        ratio_se = per_seed.std(0, ddof=1) / np.sqrt(len(st)) / ref.mean((0, 1))
-        print(f"  eta {eta}: {secs:.0f} s; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f}, max |z| "
-              f"{np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean / NumPy {fmt(ratio)} "
-              f"+- {fmt(ratio_se)}; median pixel rel SE {np.median(se[lit] / mean[lit]):.4f}")
-        for name, wrong in (("no light-side Fresnel", halfspace.setup_image(scene, sub=4, fresnel_light=False)),
-                            ("straight inverse square", halfspace.setup_image(scene, sub=4, geometry="straight")),
-                            ("no eta^2 in G", ref / eta ** 2)):
-            zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
-            print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
-                  f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
+        against_numpy(mi, scene, 4, ref, {
+            "no light-side Fresnel": halfspace.setup_image(scene, sub=4, fresnel_light=False),
+            "straight inverse square": halfspace.setup_image(scene, sub=4, geometry="straight"),
+            "no eta^2 in G": ref / eta ** 2})
 
 
 def part_slab(mi, args):
@@ -91,25 +98,10 @@ def part_slab(mi, args):
           "K = 16 x 128 spp, max_depth 6)")
     for eta in (1.33, 1.5):
         scene = halfspace.validation_scene(eta, size=32, setup=setup)
-        st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=6), range(16), 128)
-        mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
-        ref = halfspace.setup_image(scene, setup=setup, sub=6, nodes=64)
-        lit = np.all(se > 0, axis=-1)
-        z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
-        per_seed = st.mean((1, 2))
-        ratio = per_seed.mean(0) / ref.mean((0, 1))
-        ratio_se = per_seed.std(0, ddof=1) / np.sqrt(len(st)) / ref.mean((0, 1))
-        print(f"  eta {eta}: {secs:.0f} s; chains outside the slab's footprint {halfspace.slab_outside_share(scene):.1e} "
-              f"of the integral; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f} of {int(lit.sum())} pixels, "
-              f"max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean / NumPy {fmt(ratio)} "
-              f"+- {fmt(ratio_se)}; median pixel rel SE {np.median(se[lit] / mean[lit]):.4f}")
-        for name, wrong in (("middle Fresnel factor skipped",
-                             halfspace.setup_image(scene, setup=setup, sub=4, fresnel_count=2)),
-                            ("straight inverse square",
-                             halfspace.setup_image(scene, setup=setup, sub=4, geometry="straight"))):
-            zw = ((mean - wrong) / np.where(se > 0, se, 1))[lit]
-            print(f"    planted '{name}': mean z^2 {np.mean(zw ** 2):.1f}, image mean / NumPy "
-                  f"{fmt(per_seed.mean(0) / wrong.mean((0, 1)))}")
+        against_numpy(mi, scene, 6, halfspace.setup_image(scene, setup=setup, sub=6, nodes=64), {
+            "middle Fresnel factor skipped": halfspace.setup_image(scene, setup=setup, sub=4, fresnel_count=2),
+            "straight inverse square": halfspace.setup_image(scene, setup=setup, sub=4, geometry="straight")},
+            note=f"chains outside the slab's footprint {halfspace.slab_outside_share(scene):.1e} of the integral; ")
 
 
 def part_eta1(mi, args):
