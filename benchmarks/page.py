@@ -242,7 +242,8 @@ def run(main, name, title, markdown=False):
     For the benchmarks whose figures are what they print: ``raise SystemExit(run(main, NAME, TITLE))``
     in place of ``main()``. ``--write`` (taken off the arguments before ``main`` parses them) writes
     the page; the page is written only when ``main`` returns 0 or None, so a failed run leaves the
-    committed page as it was. The command on the page is the one run, without ``--write``.
+    committed page as it was (and says so, except after bad input, exit 2, whose one line is the
+    benchmark's own). The command on the page is the one run, without ``--write``.
     ``name`` and ``title`` may be functions of the arguments (a benchmark in parts: one page per part).
     """
     argv = list(sys.argv)
@@ -257,7 +258,8 @@ def run(main, name, title, markdown=False):
     with page.capture(markdown=markdown):
         status = main()
     if status not in (None, 0):
-        print(f"{name}: exit {status}; page not written", file=sys.stderr)
+        if status != 2:     # exit 2 is bad input, which the benchmark has said in its one line
+            print(f"{name}: exit {status}; page not written", file=sys.stderr)
         return status
     page.finish(write)
     return 0

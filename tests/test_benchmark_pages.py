@@ -132,7 +132,7 @@ def _toy(status, printed="| a |\n|---|\n| 1.5 |"):
     return main
 
 
-def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch):
+def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch, capsys):
     monkeypatch.setattr(page, "OTHER_PAGES", ())
     monkeypatch.setattr(page, "_git", lambda *a: "" if a[0] == "status" else "abc1234567")
     monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--n", "3"])
@@ -141,6 +141,9 @@ def test_run_writes_only_with_write_and_on_success(pages_in, monkeypatch):
     monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--write", "--n", "3"])
     assert page.run(_toy(1), "toy", "Toy") == 1
     assert not (pages_in / "benchmarks").exists()                    # a failed run: nothing written
+    assert "toy: exit 1; page not written" in capsys.readouterr().err
+    assert page.run(_toy(2), "toy", "Toy") == 2                      # bad input: the benchmark's one line only
+    assert not (pages_in / "benchmarks").exists() and capsys.readouterr().err == ""
     monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / "toy.py"), "--write", "--n", "3"])
     assert page.run(_toy(None), "toy", "Toy", markdown=True) == 0
     written = pages_in / "benchmarks" / "toy.md"
