@@ -42,16 +42,9 @@ import numpy as np
 
 from harness.reference import halfspace
 from harness.reference import mitsuba_scene as ms
-from harness.scene import Boundary, list_scenes, load_scene
+from harness.scene import Boundary, load_scene
 
-SMOOTH_SCENES = [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
-
-
-def stack(mi, d, seeds, spp):
-    scene = mi.load_dict(d)
-    t = time.perf_counter()
-    out = np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
-    return out, time.perf_counter() - t
+SMOOTH_SCENES = ms.smooth_suite_scenes()
 
 
 def fmt(a, digits=4):
@@ -63,7 +56,7 @@ def fmt(a, digits=4):
 def against_numpy(mi, scene, max_depth, ref, planted, note=""):
     """Render ``scene`` (K = 16 x 128 spp, ``max_depth``) and print its agreement with the NumPy image ``ref``
     (z-statistics over the pixels with noise, the image mean ratio) and how far each planted error's image lies."""
-    st, secs = stack(mi, ms.build_scene_dict(scene, max_depth=max_depth), range(16), 128)
+    st, secs = ms.render_seeds(mi, ms.build_scene_dict(scene, max_depth=max_depth), range(16), 128)
     mean, se = st.mean(0), st.std(0, ddof=1) / np.sqrt(len(st))
     lit = np.all(se > 0, axis=-1)
     z = ((mean - ref) / np.where(se > 0, se, 1))[lit]
@@ -108,8 +101,8 @@ def part_eta1(mi, args):
     print("test 2: eta = 1.0001 (mneevolpath) against index-matched volpath (jade_veins, 32 x 32, K = 8 x 256)")
     base = load_scene("jade_veins").with_resolution(32, 32)
     smooth = dataclasses.replace(base, boundary=Boundary("dielectric", 1.0001, 0.0))
-    a, ta = stack(mi, ms.build_scene_dict(smooth), range(8), 256)
-    b, tb = stack(mi, ms.build_scene_dict(base), range(100, 108), 256)
+    a, ta = ms.render_seeds(mi, ms.build_scene_dict(smooth), range(8), 256)
+    b, tb = ms.render_seeds(mi, ms.build_scene_dict(base), range(100, 108), 256)
     se = np.sqrt(a.var(0, ddof=1) / len(a) + b.var(0, ddof=1) / len(b))
     lit = np.all(se > 0, axis=-1)
     z = ((a.mean(0) - b.mean(0)) / np.where(se > 0, se, 1))[lit]
@@ -123,13 +116,13 @@ def part_eta1(mi, args):
 def part_area_limit(mi, args):
     setup = dict(halfspace.SETUP, sigma_t=(1.6, 1.6, 1.6), albedo=(0.8, 0.8, 0.8))
     scene = halfspace.validation_scene(1.33, size=8, setup=setup)
-    point, tp = stack(mi, ms.build_scene_dict(scene, max_depth=4), range(8), 1024)
+    point, tp = ms.render_seeds(mi, ms.build_scene_dict(scene, max_depth=4), range(8), 1024)
     pm = point.mean((1, 2))[:, 0]
     print(f"test 3: sphere light of radius r / point light (grey half-space, single scattering, 8 x 8); "
           f"point light K = 8 x 1024 spp in {tp:.0f} s, rel SE {pm.std(ddof=1) / np.sqrt(8) / pm.mean():.4f}")
     for r in (0.4, 0.25, 0.15, 0.1):
         d = ms.build_scene_dict(scene, **ms.area_light_limit(setup["light"], setup["intensity"], r, 4))
-        area, ta = stack(mi, d, range(100, 108), args.area_spp)
+        area, ta = ms.render_seeds(mi, d, range(100, 108), args.area_spp)
         am = area.mean((1, 2))[:, 0]
         ratio = am.mean() / pm.mean()
         se = ratio * np.hypot(am.std(ddof=1) / np.sqrt(8) / am.mean(), pm.std(ddof=1) / np.sqrt(8) / pm.mean())
@@ -142,15 +135,15 @@ def part_rough(mi, args):
     name = "skin_torus_dielectric"
     base = load_scene(name).with_resolution(32, 32)
     cov = ms.coverage_mask(base) >= 0.999
-    ex, te = stack(mi, ms.build_scene_dict(base), range(8), args.rough_spp // 4)
+    ex, te = ms.render_seeds(mi, ms.build_scene_dict(base), range(8), args.rough_spp // 4)
     exact = ex.mean(0)
     print(f"report: rough dielectric alpha -> 0 against the exact image ({name}, 32 x 32; exact K = 8 x "
           f"{args.rough_spp // 4} spp in {te:.0f} s, median rel SE "
           f"{np.median((ex.std(0, ddof=1) / np.sqrt(8))[cov] / exact[cov]):.4f})")
     for alpha in (0.2, 0.1, 0.05):
         rough = dataclasses.replace(base, boundary=Boundary("dielectric", base.boundary.eta, alpha))
-        full, tf = stack(mi, ms.build_scene_dict(rough), range(8), args.rough_spp)
-        absorber, ta = stack(mi, ms.build_scene_dict(rough, albedo_override=0.0), range(200, 208), args.rough_spp)
+        full, tf = ms.render_seeds(mi, ms.build_scene_dict(rough), range(8), args.rough_spp)
+        absorber, ta = ms.render_seeds(mi, ms.build_scene_dict(rough, albedo_override=0.0), range(200, 208), args.rough_spp)
         sub = full - absorber                      # the subsurface part, separated as the harness does
         m = sub.mean(0)
         rel_se = np.median((sub.std(0, ddof=1) / np.sqrt(8))[cov] / np.maximum(m[cov], 1e-12))
@@ -172,7 +165,7 @@ def part_failures(mi, args):
     for name, scene in failure_scenes():
         d = ms.build_scene_dict(scene, max_depth=4 if name.startswith("halfspace") else -1)
         d["integrator"].update(stats=True, probe_seeds=4)
-        img, _ = stack(mi, d, [0], 64)
+        img, _ = ms.render_seeds(mi, d, [0], 64)
         img = img[0]
         tot = img.sum((0, 1))
         from harness.reference.mnee import PROBE_AOVS, STATS_AOVS   # after use_variant: its integrator needs one

@@ -41,27 +41,19 @@ Usage: ``.venv/bin/python benchmarks/mnee_chains.py [--scene torus_hole] [--size
 import argparse
 import dataclasses
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
-from harness.scene import Boundary, list_scenes, load_scene
+from harness.scene import Boundary, load_scene
 
 SMOOTH_SCENES = ("torus_hole", "skin_torus_dielectric", "jade_backlit_dielectric")
 
 
 def scene_named(name):
     return nonconvex.torus_hole() if name == "torus_hole" else load_scene(name)
-
-
-def render(mi, d, seeds, spp):
-    scene = mi.load_dict(d)
-    t = time.perf_counter()
-    out = np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
-    return out, time.perf_counter() - t
 
 
 def median_rel_se(stack, covered):
@@ -104,8 +96,7 @@ def main():
             print(f"error: --scene: scene: --area-limit takes one scene, not {len(args.scene)}; name one", file=sys.stderr)
             return 2
         return area_limit(mi, args)
-    smooth = [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
-    for name in args.scene or ["torus_hole", *smooth]:
+    for name in args.scene or ["torus_hole", *ms.smooth_suite_scenes()]:
         eta_one(mi, args, name)
 
 
@@ -159,10 +150,10 @@ def area_ratio(mi, scene, r, md, seeds, area_spp, spp):
     """Sphere light (volpath) over point light (the scene's integrator) at ``max_depth = md``: ratio, SE, pixels out."""
     light = scene.lights[0]
     area = ms.area_light_limit(light.position, light.intensity, r, md)
-    full, _ = render(mi, ms.build_scene_dict(scene, **area), range(100, 100 + seeds), area_spp)
-    absorber, _ = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), area_spp // 4)
+    full, _ = ms.render_seeds(mi, ms.build_scene_dict(scene, **area), range(100, 100 + seeds), area_spp)
+    absorber, _ = ms.render_seeds(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 202), area_spp // 4)
     keep = np.all(absorber.mean(0) <= 1e-3 * np.maximum(full.mean(0), 1e-12), axis=-1)
-    point, _ = render(mi, ms.build_scene_dict(scene, max_depth=md), range(seeds), spp)
+    point, _ = ms.render_seeds(mi, ms.build_scene_dict(scene, max_depth=md), range(seeds), spp)
     f, p = full[:, keep].mean(1), point[:, keep].mean(1)
     ratio = f.mean(0) / p.mean(0)
     se = ratio * np.sqrt(f.var(0, ddof=1) / len(f) / f.mean(0) ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)
@@ -270,8 +261,8 @@ def area_limit(mi, args):
           f"{args.seeds} x {args.spp}")
     area = ms.area_light_limit(light.position, light.intensity, r, md)
     seeds = range(100, 100 + args.seeds)
-    full, tf = render(mi, ms.build_scene_dict(scene, **area), seeds, args.area_spp)
-    absorber, ta = render(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 200 + args.seeds),
+    full, tf = ms.render_seeds(mi, ms.build_scene_dict(scene, **area), seeds, args.area_spp)
+    absorber, ta = ms.render_seeds(mi, ms.build_scene_dict(scene, albedo_override=0.0, **area), range(200, 200 + args.seeds),
                           args.area_spp)
     # Pixels where the bulb's reflection shows (in any channel, in the absorber image) are left out, so
     # that its noise does not swamp the comparison; the rest are compared as they are.
@@ -284,7 +275,7 @@ def area_limit(mi, args):
     for mc in args.max_crossings:
         d = ms.build_scene_dict(scene, max_depth=md)
         d["integrator"]["max_crossings"] = mc
-        p, tp = render(mi, d, range(args.seeds), args.spp)
+        p, tp = ms.render_seeds(mi, d, range(args.seeds), args.spp)
         p = p[:, keep].mean(1)
         ratio = area / p.mean(0)
         se = ratio * np.sqrt(var_area / area ** 2 + p.var(0, ddof=1) / len(p) / p.mean(0) ** 2)

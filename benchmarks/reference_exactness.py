@@ -36,7 +36,7 @@ from harness.paths import REPO
 from harness.reference import coverage, losses
 from harness.reference import mitsuba_scene as ms
 from harness.reference import nonconvex
-from harness.scene import list_scenes, load_scene, scene_hash
+from harness.scene import load_scene, scene_hash
 
 VALIDATION = ("torus_hole",)
 
@@ -45,11 +45,6 @@ WAYS = ("committed", "chains", "sampled")
 #: reflects two to four times inside (``ERR``, ``ERRR``, ``ERRRR``: ``docs/benchmarks/mnee_sms.md`` names the
 #: last two among the largest labels no default chain delivers, 0.8 % of the red light together) too.
 SAMPLED_CHAINS = {"torus_hole": "T,RT,Tr,TTT,RRT,RRRT,RRRRT"}
-
-
-def suite_dielectric():
-    """The suite's scenes behind a smooth dielectric boundary."""
-    return [n for n in list_scenes() if ms.smooth_dielectric(load_scene(n).boundary)]
 
 
 def scene_named(name):
@@ -84,7 +79,7 @@ def main():
     from page import Page
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=suite_dielectric() + list(VALIDATION))
+    ap.add_argument("--scenes", nargs="+", default=ms.smooth_suite_scenes() + list(VALIDATION))
     ap.add_argument("--trials", type=int, default=256)
     ap.add_argument("--chains", default=None, help="sms_chains for the sampled way (default: the scene's)")
     ap.add_argument("--ways", nargs="+", choices=WAYS, default=list(WAYS))

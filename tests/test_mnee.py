@@ -45,8 +45,7 @@ def mi():
 
 
 def render_stack(mi, scene_dict, seeds, spp):
-    scene = mi.load_dict(scene_dict)
-    return np.stack([np.asarray(mi.render(scene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
+    return ms.render_seeds(mi, scene_dict, seeds, spp)[0]
 
 
 def area_light_ratio(mi, scene, radius, max_depth, full_seeds, full_spp, absorber_spp):

@@ -209,6 +209,13 @@ def smooth_dielectric(boundary):
     return not boundary.index_matched and float(boundary.roughness) == 0.0
 
 
+def smooth_suite_scenes():
+    """The names of the suite's scenes behind a smooth dielectric boundary (:func:`smooth_dielectric`)."""
+    from harness.scene import list_scenes, load_scene
+
+    return [n for n in list_scenes() if smooth_dielectric(load_scene(n).boundary)]
+
+
 def rough_dielectric(boundary):
     """A dielectric boundary with roughness > 0: the GGX approximation of :data:`DIELECTRIC_NOTE`."""
     return not boundary.index_matched and float(boundary.roughness) > 0.0
@@ -470,6 +477,16 @@ def coverage_mask(scene, sub=4):
     return hit.reshape(H, W, S).mean(axis=2).astype(np.float32)
 
 
+def render_seeds(mi, scene_dict, seeds, spp):
+    """Render the Mitsuba scene dict once per seed: the (seeds, H, W, C) float64 stack and the render seconds."""
+    import time
+
+    mscene = mi.load_dict(scene_dict)
+    t = time.perf_counter()
+    out = np.stack([np.asarray(mi.render(mscene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
+    return out, time.perf_counter() - t
+
+
 def render_in_passes(mi, scene, seeds, spp, integrator=None):
     """``scene`` rendered as the reference renders it (:func:`channel_passes`), per seed: one RGB pass, or in a
     chromatic medium one grey pass per channel of which that channel is kept. ``integrator``: settings added to the
@@ -479,16 +496,12 @@ def render_in_passes(mi, scene, seeds, spp, integrator=None):
 
     Limits: for comparisons (the eta -> 1 tests and benchmarks); the reference itself renders through
     :mod:`harness.reference.jobs`, which also splits specular manifold sampling into a pass of its own."""
-    import time
-
     passes, out, seconds = channel_passes(scene.medium), None, 0.0
     for c in passes:
         d = build_scene_dict(scene, channel=c)
         d["integrator"].update(integrator or {})
-        mscene = mi.load_dict(d)
-        t = time.perf_counter()
-        a = np.stack([np.asarray(mi.render(mscene, seed=int(s), spp=spp), dtype=np.float64) for s in seeds])
-        seconds += time.perf_counter() - t
+        a, t = render_seeds(mi, d, seeds, spp)
+        seconds += t
         if c is None:
             return a, seconds
         if out is None:
