@@ -9,7 +9,8 @@ Parts (``--part``, default all but ``slab``, ``time``, ``rough`` and ``eta2``, w
                 (air between; :data:`harness.reference.halfspace.SLAB_SETUP`), single scattering
                 through three interfaces, eta 1.33 and 1.5, 32 x 32, K = 16 x 128 spp, against the
                 NumPy route: z-statistics, image mean, two planted errors.
-``eta1``        test 2: eta = 1.0001 against index-matched ``volpath`` (jade_veins, 32 x 32).
+``eta1``        test 2: eta = 1.0001 against index-matched ``volpath`` (jade_veins, 32 x 32), over the lit
+                pixels as the eta -> 1 tests count them (:func:`harness.reference.noise.stack_agreement`).
 ``area-limit``  test 3's sequence: stock ``volpath`` with a sphere light of radius r
                 (radiance I / (pi r^2)) behind the grey half-space over the point-light image,
                 r = 0.4, 0.25, 0.15, 0.1.
@@ -42,6 +43,7 @@ import numpy as np
 
 from harness.reference import halfspace
 from harness.reference import mitsuba_scene as ms
+from harness.reference.noise import lit_mask, stack_agreement
 from harness.scene import Boundary, load_scene
 
 SMOOTH_SCENES = ms.smooth_suite_scenes()
@@ -103,14 +105,11 @@ def part_eta1(mi, args):
     smooth = dataclasses.replace(base, boundary=Boundary("dielectric", 1.0001, 0.0))
     a, ta = ms.render_seeds(mi, ms.build_scene_dict(smooth), range(8), 256)
     b, tb = ms.render_seeds(mi, ms.build_scene_dict(base), range(100, 108), 256)
-    se = np.sqrt(a.var(0, ddof=1) / len(a) + b.var(0, ddof=1) / len(b))
-    lit = np.all(se > 0, axis=-1)
-    z = ((a.mean(0) - b.mean(0)) / np.where(se > 0, se, 1))[lit]
-    pa, pb = a.mean((1, 2)), b.mean((1, 2))
-    se_m = np.sqrt(pa.var(0, ddof=1) / len(pa) + pb.var(0, ddof=1) / len(pb))
-    print(f"  {ta:.0f} s / {tb:.0f} s; within 4 SE {np.mean(np.all(np.abs(z) <= 4, -1)):.4f}, max |z| "
-          f"{np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean ratio {fmt(pa.mean(0) / pb.mean(0))}, "
-          f"difference / SE {fmt((pa.mean(0) - pb.mean(0)) / se_m, 2)}")
+    ag = stack_agreement(a, b, lit_mask(b.mean(0), ms.coverage_mask(base)))   # lit as the eta -> 1 tests count
+    z = ag["z"][np.isfinite(ag["z"])]
+    print(f"  {ta:.0f} s / {tb:.0f} s; lit pixels within 4 SE {ag['within']:.4f} of {ag['pixels']}, max |z| "
+          f"{np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.3f}; image mean ratio {fmt(ag['ratio'])}, "
+          f"difference / SE {fmt(ag['diff'] / ag['diff_se'], 2)}")
 
 
 def part_area_limit(mi, args):

@@ -103,7 +103,7 @@ def main():
 def eta_one(mi, args, name):
     """eta = 1.0001 against index-matched volpath on the scene ``name``, with and without chains (docstring)."""
     from harness.reference import mnee
-    from harness.reference.noise import lit_mask
+    from harness.reference.noise import lit_mask, stack_agreement
 
     base = scene_named(name).with_resolution(args.size, args.size)
     matched = dataclasses.replace(base, boundary=Boundary("index-matched"))
@@ -123,13 +123,9 @@ def eta_one(mi, args, name):
         a, ta = ms.render_in_passes(mi, smooth, range(args.seeds), args.spp, {"stats": True, "max_crossings": mc})
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
         st = dict(zip(names[3:], aov))
-        se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
-        # z per lit channel (as the eta -> 1 tests judge: noise.lit_mask of the index-matched image); a pixel is
-        # within when its lit channels are
-        z = np.where(lit_c & (se > 0), (img.mean(0) - b.mean(0)) / np.where(se > 0, se, 1), np.nan)
-        within = np.all(~(np.abs(z) > 4), axis=-1)[lit_c.any(axis=-1)]
-        pa = img.mean((1, 2))
-        se_m = np.sqrt(pa.var(0, ddof=1) / len(pa) + pb.var(0, ddof=1) / len(pb))
+        # z per lit channel, as the eta -> 1 tests judge (noise.lit_mask of the index-matched image)
+        ag = stack_agreement(img, b, lit_c)
+        z, within = ag["z"], ag["within"]
         started = st["mnee_started"]
         cross = [st[k] / started for k in ("mnee_cross1", "mnee_cross3", "mnee_cross5", "mnee_cross7_more")]
         over = st["mnee_over_max"] / started
@@ -138,8 +134,8 @@ def eta_one(mi, args, name):
         # Time to a noise target T = t (r / target)^2 for both, in one run: their ratio.
         print(f"  max_crossings = {mc}: {ta:.0f} s ({ta / tb:.2f} x index-matched), median rel. SE {ra:.4f}: time to "
               f"the same noise {ta * ra ** 2 / (tb * rb ** 2):.2f} x index-matched; image mean ratio "
-              f"{fmt(pa.mean(0) / pb.mean(0))}, (difference) / SE {fmt((pa.mean(0) - pb.mean(0)) / se_m, 2)}; "
-              f"lit pixels within 4 SE {within.mean():.4f} of {within.size}, mean z {fmt(np.nanmean(z.reshape(-1, 3), 0), 2)}")
+              f"{fmt(ag['ratio'])}, (difference) / SE {fmt(ag['diff'] / ag['diff_se'], 2)}; "
+              f"lit pixels within 4 SE {within:.4f} of {ag['pixels']}, mean z {fmt(np.nanmean(z.reshape(-1, 3), 0), 2)}")
         print(f"    connections by crossings of the seed segment (1, 3, 5, >= 7): {fmt(cross)}; chains connected "
               f"{st['mnee_chain_connected'] / started:.4f}, lost {st['mnee_lost'] / started:.4f} (over the maximum "
               f"{over:.4f}); lost light "

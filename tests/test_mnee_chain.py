@@ -198,7 +198,7 @@ def eta_one_comparison(mi, smooth, matched, spp, crossings):
     seeds is mostly 0 and says nothing.
     """
     from harness.reference import mnee
-    from harness.reference.noise import lit_mask
+    from harness.reference.noise import lit_mask, stack_agreement
 
     b, _ = ms.render_in_passes(mi, matched, range(100, 108), spp)
     lit_c = lit_mask(b.mean(0), ms.coverage_mask(matched))
@@ -206,19 +206,13 @@ def eta_one_comparison(mi, smooth, matched, spp, crossings):
     for mc in crossings:
         a, _ = ms.render_in_passes(mi, smooth, range(8), spp, {"stats": True, "max_crossings": mc})
         img, aov = a[..., :3], a[..., 3:].sum((1, 2)).mean(0)
-        se = np.sqrt(img.var(0, ddof=1) / len(img) + b.var(0, ddof=1) / len(b))
-        z = np.abs(img.mean(0) - b.mean(0)) / np.where(se > 0, se, np.inf)
-        lit = lit_c.any(axis=-1)
-        within = np.all((z <= 4) | ~lit_c, axis=-1)[lit]
-        pa, pb = img.mean((1, 2)), b.mean((1, 2))
-        se_mean = np.sqrt(pa.var(0, ddof=1) / len(pa) + pb.var(0, ddof=1) / len(pb))
-        ratio, diff = pa.mean(0) / pb.mean(0), pa.mean(0) - pb.mean(0)
-        frac4 = float(np.mean(within))
-        ok = frac4 >= 0.99 and bool(np.all((np.abs(ratio - 1) <= 0.01) | (np.abs(diff) <= 3 * se_mean)))
+        ag = stack_agreement(img, b, lit_c)
+        ratio, diff, se_mean = ag["ratio"], ag["diff"], ag["diff_se"]
+        ok = ag["within"] >= 0.99 and bool(np.all((np.abs(ratio - 1) <= 0.01) | (np.abs(diff) <= 3 * se_mean)))
         st = dict(zip(mnee.STATS_AOVS, aov))
         cross3 = st["mnee_cross3"] / st["mnee_started"]
-        out[mc] = (ok, f"max_crossings = {mc}: within 4 SE {frac4:.4f} of {lit.sum()} pixels, image mean ratio "
-                       f"{np.round(ratio, 4)} (|diff| / SE {np.round(np.abs(diff) / se_mean, 2)}); 3 crossings "
+        out[mc] = (ok, f"max_crossings = {mc}: within 4 SE {ag['within']:.4f} of {ag['pixels']} pixels, image mean "
+                       f"ratio {np.round(ratio, 4)} (|diff| / SE {np.round(np.abs(diff) / se_mean, 2)}); 3 crossings "
                        f"{cross3:.3f} of the connections", cross3)
     return out
 

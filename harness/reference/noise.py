@@ -81,3 +81,28 @@ def se_median_factor(k):
     from scipy.stats import chi2
 
     return math.sqrt(chi2.median(k - 1) / (k - 1))
+
+
+def stack_agreement(a, b, lit, z_max=4.0):
+    """How two independent seed stacks ``a`` and ``b`` (K, H, W, 3) of the same image agree, per lit channel.
+
+    ``lit`` is the (H, W, 3) mask of :func:`lit_mask` (usually of ``b``'s mean). Per channel of a pixel,
+    ``z = (mean_a - mean_b) / sqrt(se_a^2 + se_b^2)`` with each SE from its own seeds (:func:`seed_stats`); a channel
+    whose combined SE is 0 (no seed saw light, or every seed the same: a shadow ray's 0-or-1 transmittance) has no
+    z and counts as agreeing. A pixel is *within* when each of its lit channels has ``|z| <= z_max``.
+
+    Returns a dict: ``within`` (the fraction of pixels with a lit channel that are within; NaN when none is lit),
+    ``pixels`` (how many have a lit channel), ``z`` ((H, W, 3), NaN where unlit or without an SE), ``ratio`` and
+    ``diff`` (per channel, image mean of ``a`` over that of ``b``, and their difference) and ``diff_se`` (the
+    difference's standard error, from the per-seed image means).
+    """
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    (ma, sa), (mb, sb) = seed_stats(a), seed_stats(b)
+    se = np.hypot(sa, sb)
+    z = np.where(lit & (se > 0), (ma - mb) / np.where(se > 0, se, 1.0), np.nan)
+    rows = lit.any(axis=-1)
+    within = np.all(~(np.abs(z) > z_max), axis=-1)[rows]
+    pa, pb = a.mean(axis=(1, 2)), b.mean(axis=(1, 2))
+    diff_se = np.hypot(pa.std(axis=0, ddof=1) / math.sqrt(len(pa)), pb.std(axis=0, ddof=1) / math.sqrt(len(pb)))
+    return {"within": float(within.mean()) if within.size else float("nan"), "pixels": int(rows.sum()), "z": z,
+            "ratio": pa.mean(axis=0) / pb.mean(axis=0), "diff": pa.mean(axis=0) - pb.mean(axis=0), "diff_se": diff_se}
