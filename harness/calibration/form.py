@@ -19,6 +19,17 @@ per grid; their budgets are taken together) and
    median held-out relMSE at most :data:`FORM_RELMSE_FACTOR` times the best family's;
 5. writes, atomically, ``OUT/calibrated.toml`` (version 3) and ``OUT/calibration.json``.
 
+With ``slopes = "radiance"`` (``--slopes radiance``) the form is *conditional* (Eq. F7): ``sigma_scale`` stays
+the scalar fit's (every sigma slope 0), and only ``ln r`` depends on the material. Its targets are not the
+oracle's ``(s_i, r_i)``, which scatter along the loss's valley, but each training scene's best radiance scale
+at the fold's own scalar ``s`` (its held-out ``s`` for a fold, its in-sample ``s`` for the file):
+
+    y_i = ln(B_i(s) / A_i(s))     (the minimum over r of Eq. C1, scene i rendered at sigma_scale s)         (F7)
+
+regressed on the terms as in (F5) and anchored at the fold's scalar ``r`` as in (F6). Each target is a render
+of a training scene at its fold's ``s`` (:func:`radiance_targets`), so nothing of the held-out scene reaches
+its fold.
+
 ``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
 step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
 the render loss (C2) itself (:mod:`harness.calibration.form_fit`); the scene's oracle is the
@@ -44,10 +55,13 @@ from harness.calibration.run import ENERGY_TARGET, _figures, _reference
 from harness.calibration.scan import budget_label
 from harness.errors import InputError
 
-__all__ = ["scene_terms", "budget_terms", "fold_fits", "fold_anchor", "form_toml", "run_form", "FORM_RELMSE_FACTOR", "main"]
+__all__ = ["scene_terms", "budget_terms", "fold_fits", "fold_anchor", "radiance_targets", "fold_fits_radiance",
+           "form_toml", "run_form", "FORM_RELMSE_FACTOR", "SLOPES", "main"]
 
 #: Target: median held-out relMSE at most this times the best calibrated family's at the budget.
 FORM_RELMSE_FACTOR = 0.5
+#: Which scales depend on the material: both (F5, on the oracle) or the radiance scale alone (F7).
+SLOPES = ("both", "radiance")
 
 
 def budget_terms(steps):
@@ -92,6 +106,33 @@ def fold_anchor(res, held):
     pair = (res["sigma_scale"], res["radiance_scale"]) if held is None else \
         (res["held_out"][held]["s"], res["held_out"][held]["r"])
     return math.log(pair[0]), math.log(pair[1])
+
+
+def radiance_targets(render_at, names, s):
+    """Eq. (F7)'s targets: ``{scene: ln(B / A)}``, each scene's best ``ln r`` at ``sigma_scale = s``.
+    ``render_at(name, s)`` returns ``(A, B, C)`` of Eq. (C1) or None (no image: that scene is left out)."""
+    out = {}
+    for n in names:
+        abc = render_at(n, s)
+        if abc is not None and abc[0] > 0.0 and abc[1] > 0.0:
+            out[n] = math.log(abc[1] / abc[0])
+    return out
+
+
+def fold_fits_radiance(names, X, targets, held, anchor):
+    """Eq. (F7) on every scene but ``held``: ``sigma`` is the anchor's ``ln s`` with every slope 0; ``radiance``
+    the ridge regression (F5) of ``targets`` (scene -> ln r at that ``s``, the training scenes' only) with its
+    level at the anchor's ``ln r`` (F6). Same dict as :func:`fold_fits`."""
+    from harness.calibration.form_fit import choose_lambda, ridge
+
+    train = [n for n in names if n != held and n in targets]
+    Xt = np.asarray([X[n] for n in train], dtype=np.float64)
+    y = np.asarray([targets[n] for n in train], dtype=np.float64)
+    lam = choose_lambda(Xt, (y,))
+    _, b = ridge(Xt, y, lam)
+    b0 = float(anchor[1] - Xt.mean(axis=0) @ b)
+    return {"sigma": [float(anchor[0])] + [0.0] * Xt.shape[1], "radiance": [b0, *map(float, b)], "lam": lam,
+            "scenes": train}
 
 
 def form_toml(family, settings, budgets, fit_info):
@@ -191,10 +232,27 @@ def _sources(paths):
     return merged, settings
 
 
+def _coefficients(renderer, scene, ref, mapping, settings, N, k, s):
+    """``(A, B, C)`` of Eq. (C1) for ``scene`` rendered with the family's ``mapping`` at ``sigma_scale = s``, or None
+    where the render has no image (no steady state, non-finite pixels)."""
+    from harness.calibration.fit import relmse_coefficients
+    from sslpv_gl.params import SSLPVParams
+
+    try:
+        img = renderer.render(scene, SSLPVParams(N=N, steps=k, mapping=mapping, sigma_scale=float(s), **settings))
+    except (ValueError, FloatingPointError):
+        return None
+    img, m = np.asarray(img.subsurface, dtype=np.float64), ref["mask"]
+    if not np.all(np.isfinite(img)):
+        return None
+    return relmse_coefficients(img[m].ravel(), np.asarray(ref["subsurface"], dtype=np.float64)[m].ravel())
+
+
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
-             command="python -m harness.calibration.form"):
+             command="python -m harness.calibration.form", slopes="both"):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
-    family whose budgets are taken together; module docstring) -> the report dict."""
+    family whose budgets are taken together; module docstring) -> the report dict. ``slopes``: ``"both"`` (F5) or
+    ``"radiance"`` (F7, always anchored)."""
     from harness.io.atomic import _check_replaceable, atomic_dir
     from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
@@ -220,6 +278,16 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
 
         renderer = SSLPVRenderer()
 
+    if slopes not in SLOPES:
+        raise InputError("--slopes", "slopes", f"unknown {slopes!r}", f"use one of: {', '.join(SLOPES)}")
+    memo = {}
+
+    def at(n, N, k, s):
+        key = (n, N, k, float(s))
+        if key not in memo:
+            memo[key] = _coefficients(renderer, scenes[n], refs[n], cal["mapping"], settings, N, k, s)
+        return memo[key]
+
     # 1.-2. terms, oracle, fits (in-sample: held=None)
     fits = {}
     for N, k in budgets:
@@ -231,14 +299,31 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         lam = fold_fits(names, X, ln_s, ln_r, None)["lam"]
         power = {key: predictive_power([X[n] for n in names], [y[n] for n in names], lam)
                  for key, y in (("ln_s", ln_s), ("ln_r", ln_r))}
-        fits[label] = {"terms": terms, "X": X, "power": power,
-                       "folds": {held: fold_fits(names, X, ln_s, ln_r, held,
-                                                 fold_anchor(res, held) if anchored else None)
-                                 for held in [None, *names]}}
+        if slopes == "radiance":                                                    # (F7)
+            folds, targets = {}, {}
+            for held in [None, *names]:
+                anchor = fold_anchor(res, held)
+                t = radiance_targets(lambda n, s: at(n, N, k, s), [n for n in names if n != held],
+                                     math.exp(anchor[0]))
+                folds[held] = fold_fits_radiance(names, X, t, held, anchor)
+                targets = targets or t
+                progress(f"{label}: radiance targets of the fold without {held or 'no scene'}")
+            power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"])
+        else:
+            folds = {held: fold_fits(names, X, ln_s, ln_r, held, fold_anchor(res, held) if anchored else None)
+                     for held in [None, *names]}
+        fits[label] = {"terms": terms, "X": X, "power": power, "folds": folds}
 
-    fit_info = {"sources": sources, "loss": "ridge regression (Eq. F5 of harness.calibration.form_fit) of "
-                "ln s and ln r on the per-scene oracle of the source calibration" + (
-                    ", level anchored to its scalar fit on the same scenes (Eq. F6)" if anchored else ""),
+    if slopes == "radiance":
+        anchored = True
+        loss = ("sigma_scale: the source's scalar fit; ln r: ridge regression (Eq. F5 of harness.calibration.form_fit)"
+                " of each training scene's best ln r at that sigma_scale (Eq. F7 of harness.calibration.form), level "
+                "anchored to the scalar fit on the same scenes (Eq. F6)")
+    else:
+        loss = ("ridge regression (Eq. F5 of harness.calibration.form_fit) of ln s and ln r on the per-scene oracle "
+                "of the source calibration" + (", level anchored to its scalar fit on the same scenes (Eq. F6)"
+                                               if anchored else ""))
+    fit_info = {"sources": sources, "loss": loss, "slopes": slopes,
                 "anchored": anchored, "scenes": names,
                 "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     if argv:
@@ -290,7 +375,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
             "targets": _targets(held, {fam: med.get(label) for fam, med in best.items()}),
         }
     info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
-            "sources": sources, "anchored": anchored, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
+            "sources": sources, "anchored": anchored, "slopes": slopes, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
             "against": [str(d) for d in against], "results": results, "renders": renders,
             "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
             "created": fit_info["created"], "command": fit_info.get("command")}
@@ -329,10 +414,12 @@ def main(argv=None):
                     "relMSE target compares with (default: the --from folder)")
     ap.add_argument("--free-level", action="store_true", help="the regression's own a0 and b0 (Eq. F5), not the "
                     "source's scalar pair (Eq. F6)")
+    ap.add_argument("--slopes", choices=SLOPES, default="both", help="both scales from the material (Eq. F5, on the "
+                    "oracle), or the radiance scale alone at the scalar sigma_scale (Eq. F7)")
     args = ap.parse_args(argv)
     try:
         info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level, argv=argv,
-                        progress=lambda m: print(m, file=sys.stderr, flush=True))
+                        progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -27,6 +27,9 @@ def configure(sp):
                          "(default: [], the --from folders)")
     sp.add_argument("--free-level", action="store_true",
                     help="fit the form's own level terms instead of anchoring them to the scalar pair (Eq. F6)")
+    sp.add_argument("--slopes", choices=("both", "radiance"), default="both",
+                    help="both: sigma_scale and radiance_scale from the material (Eq. F5, on the oracle); radiance: "
+                         "sigma_scale the scalar fit's, radiance_scale from the material (Eq. F7)")
 
 
 def run(args):
@@ -38,7 +41,7 @@ def run(args):
                              f"{d} holds no calibration.json", "give a folder written by sslpv-harness calibrate")
     info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level,
                     argv=[a for a in args.argv if a != "calibrate-form"], command="sslpv-harness calibrate-form",
-                    progress=lambda m: print(m, file=sys.stderr, flush=True))
+                    progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes)
     lines = []
     for label, res in info["results"].items():
         t = res["targets"]
