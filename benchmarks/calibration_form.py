@@ -10,7 +10,8 @@ Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and 
 * the fitted coefficients of (F1) with the ridge penalty (Eq. F5) chosen for them.
 
 It computes nothing: every figure is the form's own (the scalar family's as the form's report copied them). ``--write`` puts the tables on the
-page ``docs/benchmarks/calibration_form_<family>.md`` (``benchmarks/page.py``).
+page ``docs/benchmarks/calibration_form_<family>.md`` (``..._radiance.md`` for a form fitted with
+``--slopes radiance``, Eq. F7; ``benchmarks/page.py``).
 
 Run: ``.venv/bin/python benchmarks/calibration_form.py DIR [--write]``
 """
@@ -32,7 +33,7 @@ def main(argv=None):
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path, help="a python -m harness.calibration.form --out folder")
-    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_form_<family>.md")
+    ap.add_argument("--write", action="store_true", help="write docs/benchmarks/calibration_form_<family>[_radiance].md")
     args = ap.parse_args(argv)
     path = args.dir / "calibration.json"
     if not path.is_file():
@@ -40,8 +41,10 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     form = json.loads(path.read_text())
-    page = Page(f"calibration_form_{form['family']}",
-                f"The calibration of the {form['family']} family as a form of the material")
+    radiance = form.get("slopes", "both") == "radiance"
+    page = Page(f"calibration_form_{form['family']}" + ("_radiance" if radiance else ""),
+                f"The calibration of the {form['family']} family as a form of the material"
+                + (": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)" if radiance else ""))
     with page.capture(markdown=True):
         _tables(form)
     page.finish(args.write)
@@ -86,6 +89,9 @@ def _tables(form):
         print(f"how well the terms predict the scenes' own optima (Eq. F5, leave-one-out over all scenes at that "
               f"penalty): ln s spread {p['ln_s']['sd']:.3g}, error {p['ln_s']['loo_rmse']:.3g}; ln r spread "
               f"{p['ln_r']['sd']:.3g}, error {p['ln_r']['loo_rmse']:.3g}")
+        if "ln_r_at_s" in p:
+            print(f"how well the terms predict each scene's best ln r at the scalar sigma_scale (Eq. F7, the targets of "
+                  f"this fit): spread {p['ln_r_at_s']['sd']:.3g}, error {p['ln_r_at_s']['loo_rmse']:.3g}")
         print()
         rows.append((label, t))
     print("### every budget")

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from harness.calibration.form import budget_terms, fold_anchor, fold_fits, form_toml
+from harness.calibration.form import (budget_terms, fold_anchor, fold_fits, fold_fits_radiance, form_toml,
+                                     radiance_targets)
 from harness.calibration.form_fit import fit_form, ridge
 from harness.errors import InputError
 from sslpv_gl.calibrated import load_calibrated
@@ -227,6 +228,49 @@ class TestFit:
         assert fold_anchor(res, None) == (math.log(2.0), math.log(0.5))
 
 
+class TestConditionalFit:
+    """Eq. (F7): sigma_scale the scalar fit's, ln r regressed on each training scene's best ln r at that s."""
+
+    def test_target_is_the_least_relmse_radiance_scale(self):
+        """ln(B / A) of Eq. (C1) against a brute-force scan of the registered relMSE over r (a second route)."""
+        from harness.calibration.fit import relmse_coefficients
+        from harness.metrics import compute
+
+        rng = np.random.default_rng(6)
+        ref = rng.uniform(0.01, 2.0, (9, 7, 3))
+        img = ref * rng.uniform(0.3, 0.9) * rng.lognormal(0.0, 0.3, ref.shape)
+        mask = np.ones((9, 7), bool)
+        t = radiance_targets(lambda n, s: relmse_coefficients(img.ravel(), ref.ravel()), ["a"], 1.0)
+        rs = np.exp(np.linspace(-1.0, 2.0, 3001))
+        rel = [compute("relmse", r * img, ref, mask).value for r in rs]
+        assert t["a"] == pytest.approx(math.log(rs[int(np.argmin(rel))]), abs=2e-3)
+
+    def test_a_scene_without_an_image_is_left_out(self):
+        t = radiance_targets(lambda n, s: None if n == "b" else (2.0, 1.0, 1.0), ["a", "b"], 1.0)
+        assert t == {"a": pytest.approx(math.log(0.5))}
+
+    def test_sigma_is_the_anchor_and_radiance_is_anchored_at_the_mean(self):
+        rng = np.random.default_rng(7)
+        names = [f"s{i}" for i in range(8)]
+        X = {n: list(rng.normal(size=3)) for n in names}
+        targets = {n: 0.3 + float(np.dot(X[n], [0.5, -0.2, 0.1])) for n in names}
+        f = fold_fits_radiance(names, X, targets, None, anchor=(0.4, -0.7))
+        assert f["sigma"] == [0.4, 0.0, 0.0, 0.0]
+        mx = np.mean([X[n] for n in names], axis=0)
+        assert f["radiance"][0] + mx @ f["radiance"][1:] == pytest.approx(-0.7)
+        assert f["radiance"][1:] == pytest.approx([0.5, -0.2, 0.1], abs=0.05)     # exact data, a light penalty
+
+    def test_held_out_scene_never_reaches_its_fold(self):
+        rng = np.random.default_rng(8)
+        names = [f"s{i}" for i in range(7)]
+        X = {n: list(rng.normal(size=3)) for n in names}
+        targets = {n: float(rng.normal()) for n in names}
+        a = fold_fits_radiance(names, X, targets, "s2", anchor=(0.1, 0.2))
+        X2, t2 = dict(X), dict(targets)
+        X2["s2"], t2["s2"] = [50.0, -7.0, 9.0], 40.0
+        assert fold_fits_radiance(names, X2, t2, "s2", anchor=(0.1, 0.2)) == a and "s2" not in a["scenes"]
+
+
 class TestBadInputCommandLine:
     """Through ``sslpv-harness render``: exit 2, one line, nothing left behind."""
 
@@ -326,12 +370,17 @@ class TestSources:
         assert str(exc.value).startswith(f"{b / 'calibration.json'}: {field}: ") and "\n" not in str(exc.value)
 
 
-def test_study_names_a_form_apart_from_its_scalar_family():
-    """The study's tables key a calibrated mapping by its label: a per-cell form and the scalar fit of the same family
-    must not share a column."""
+def test_study_names_a_form_apart_from_its_scalar_family(tmp_path):
+    """The study's tables key a calibrated mapping by its label: a per-cell form, a form of the radiance scale alone
+    (Eq. F7) and the scalar fit of the same family must not share a column."""
     from harness.study.spec import study_label
 
     scalar = study_label("calibrated:baselines/calibrated/collision/calibrated.toml")
     form = study_label("calibrated:baselines/calibrated/collision_form/calibrated.toml")
     assert scalar == "calibrated collision" and form == "calibrated collision form"
+    conditional = write_v3(tmp_path / "r.toml", [(32, 8, [0.3, 0, 0, 0, 0, 0], RADIANCE),
+                                                 (32, 16, [0.2, 0, 0, 0, 0, 0], [0.1, 0, 0, 0, 0, 0])])
+    assert study_label(f"calibrated:{conditional}") == "calibrated collision radiance form"
+    mixed = write_v3(tmp_path / "m.toml", [(32, 8, [0.3, 0, 0, 0, 0, 0], RADIANCE), (32, 16, SIGMA, RADIANCE)])
+    assert study_label(f"calibrated:{mixed}") == "calibrated collision form"
     assert study_label("collision") == "collision"

@@ -73,7 +73,8 @@ class StudyFile(InputModel):
 
 def study_label(mapping):
     """A calibrated mapping's family name for tables (``calibrated diffusion``; ``calibrated collision form``
-    for a file whose scales are a per-cell form, :mod:`sslpv_gl.material_form`), else the mapping."""
+    for a file whose scales are a per-cell form, :mod:`sslpv_gl.material_form`; ``calibrated collision radiance
+    form`` where only its radiance scale is, Eq. F7 of :mod:`harness.calibration.form`), else the mapping."""
     m = str(mapping)
     if not m.startswith("calibrated:"):
         return m
@@ -82,7 +83,10 @@ def study_label(mapping):
 
     try:
         cal = load_calibrated(m.split(':', 1)[1], tuple(MAPPINGS))
-        return f"calibrated {cal.family}" + (" form" if any(b.form is not None for b in cal.budgets) else "")
+        forms = [b.form for b in cal.budgets if b.form is not None]
+        if not forms:
+            return f"calibrated {cal.family}"
+        return f"calibrated {cal.family}" + (" radiance" if not any(any(f.sigma) for f in forms) else "") + " form"
     except InputError:
         return "calibrated " + Path(m.split(":", 1)[1]).parent.name
 

@@ -10,6 +10,22 @@ XT = "tests/test_study_extensions.py"
 BT = "tests/test_calibrate_best.py"
 
 FORM = (
+    Mutation("form_radiance_target_weighted_power", "mapping", "harness/calibration/form.py",
+             "out[n] = math.log(abc[1] / abc[0])", "out[n] = 0.5 * math.log(abc[2] / abc[0])",
+             (f"{FT}::TestConditionalFit::test_target_is_the_least_relmse_radiance_scale",),
+             "conditional form (Eq. F7): a scene's target r matches the weighted power sqrt(C / A), not the least relMSE"),
+    Mutation("form_radiance_loso_leak", "mapping", "harness/calibration/form.py",
+             "train = [n for n in names if n != held and n in targets]", "train = [n for n in names if n in targets]",
+             (f"{FT}::TestConditionalFit::test_held_out_scene_never_reaches_its_fold",),
+             "conditional form (Eq. F7): the held-out scene's target stays in its own fold's regression"),
+    Mutation("study_radiance_form_shares_a_column", "mapping", "harness/study/spec.py",
+             '(" radiance" if not any(any(f.sigma) for f in forms) else "")', '""',
+             (f"{FT}::test_study_names_a_form_apart_from_its_scalar_family",),
+             "study: a form of the radiance scale alone (Eq. F7) labelled as the family's full form, one column for both"),
+    Mutation("form_radiance_unanchored", "mapping", "harness/calibration/form.py",
+             "b0 = float(anchor[1] - Xt.mean(axis=0) @ b)", "b0 = float(y.mean() - Xt.mean(axis=0) @ b)",
+             (f"{FT}::TestConditionalFit::test_sigma_is_the_anchor_and_radiance_is_anchored_at_the_mean",),
+             "conditional form (Eq. F7): the radiance level from the targets' mean instead of the scalar fit (Eq. F6)"),
     Mutation("form_loso_leak", "mapping", "harness/calibration/form.py",
              "train = [n for n in names if n != held]", "train = list(names)",
              (f"{FT}::TestFit::test_held_out_scene_never_reaches_its_fold",),
