@@ -62,7 +62,7 @@ FORM = (
              (f"{FT}::TestCellForm::test_extent_is_the_inside_bounding_box",),
              "the object's extent E of Eq. (F4) one cell short"),
     Mutation("study_form_label_dropped", "cli", "harness/study/spec.py",
-             "+ (\" form\" if any(b.form is not None for b in cal.budgets) else \"\")", "",
+             'else "") + " form"', 'else "")',
              (f"{FT}::test_study_names_a_form_apart_from_its_scalar_family",),
              "the study labels a per-cell form as its scalar family: the two share one headline column"),
     Mutation("calibrate_drops_extension_flags", "cli", "harness/cli/calibrate.py",
