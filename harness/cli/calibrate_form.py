@@ -29,7 +29,7 @@ def configure(sp):
                     help="fit the form's own level terms instead of anchoring them to the scalar pair (Eq. F6)")
     sp.add_argument("--slopes", choices=("both", "radiance"), default="both",
                     help="both: sigma_scale and radiance_scale from the material (Eq. F5, on the oracle); radiance: "
-                         "sigma_scale the scalar fit's, radiance_scale from the material (Eq. F7)")
+                         "sigma_scale the scalar fit's, radiance_scale from the material (Eq. F7) (default: both)")
 
 
 def run(args):

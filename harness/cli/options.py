@@ -55,6 +55,7 @@ VOCABULARY = {
     "--from": "the calibrate folders a per-cell form is fitted from",
     "--against": "the calibrate folders a form's relMSE target compares with",
     "--free-level": "a per-cell form's own level terms",
+    "--slopes": "which scales a per-cell form makes depend on the material",
 }
 
 #: The start of the help line of an option that several commands take: the same on every command.
