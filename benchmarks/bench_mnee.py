@@ -167,9 +167,10 @@ def part_failures(mi, args):
         img, _ = ms.render_seeds(mi, d, [0], 64)
         img = img[0]
         tot = img.sum((0, 1))
-        from harness.reference.mnee import PROBE_AOVS, STATS_AOVS   # after use_variant: its integrator needs one
+        from harness.reference.mnee import PROBE_AOVS, SMS_AOVS, STATS_AOVS   # after use_variant: its integrator needs one
 
-        at = {n: 3 + i for i, n in enumerate(STATS_AOVS + PROBE_AOVS)}     # after R, G, B: the AOVs by name
+        names = STATS_AOVS + (SMS_AOVS if d["integrator"].get("sms_trials") else ()) + PROBE_AOVS   # its aov_names
+        at = {n: 3 + i for i, n in enumerate(names)}                       # after R, G, B: the AOVs by name
         assert img.shape[-1] == 3 + len(at), f"{img.shape[-1]} channels for {3 + len(at)} (R, G, B and the AOVs)"
         started, conv, conn = (tot[at[n]] for n in ("mnee_started", "mnee_converged", "mnee_connected"))
         rescued = tot[at["mnee_probe_rescued"]]
