@@ -294,16 +294,16 @@ class TestBadInputCommandLine:
 
 
 class TestCommittedForm:
-    """The committed form's figures are single renders through ``--mapping calibrated:FILE``: in-sample with the
+    """The committed forms' figures are single renders through ``--mapping calibrated:FILE``: in-sample with the
     committed file, held out with a file rebuilt from the fold's coefficients in calibration.json, measured with
     ``harness.metrics`` (never the fit's own code), on one of its scenes at every budget (about a minute: the
     steady solve at N = 32)."""
 
-    FOLDER = "baselines/calibrated/collision_form"
-
     @pytest.mark.gl
     @pytest.mark.slow
-    def test_in_sample_and_held_out_figures_are_single_renders(self, tmp_path):
+    @pytest.mark.parametrize("folder_name", ["baselines/calibrated/collision_form",
+                                             "baselines/calibrated/collision_radiance_form"])
+    def test_in_sample_and_held_out_figures_are_single_renders(self, tmp_path, folder_name):
         import json
         from pathlib import Path
 
@@ -312,7 +312,7 @@ class TestCommittedForm:
         from sslpv_gl.params import SSLPVParams
         from sslpv_gl.renderer import SSLPVRenderer
 
-        folder = Path(__file__).resolve().parent.parent / self.FOLDER
+        folder = Path(__file__).resolve().parent.parent / folder_name
         info = json.loads((folder / "calibration.json").read_text())
         cal = load_calibrated(folder / "calibrated.toml", tuple(MAPPINGS))
         renderer = SSLPVRenderer()

@@ -33,7 +33,11 @@ its fold.
 ``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
 step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
 the render loss (C2) itself (:mod:`harness.calibration.form_fit`); the scene's oracle is the
-family's (one ``(s, r)`` per scene), so the form may beat it on a heterogeneous scene.
+family's (one ``(s, r)`` per scene), so the form may beat it on a heterogeneous scene. The ridge
+penalty is on standardised coefficients, so a term that is nearly constant over the training scenes
+but for one (``ln_extent_per_step`` on the suite: eight scenes share one extent) gets a steep slope
+that fits that one scene; a held-out scene beyond it extrapolates far (the committed conditional
+form renders ``thin_ring`` held out at K = 8 and 16 many times too bright; its page gives the figures).
 """
 
 from __future__ import annotations
