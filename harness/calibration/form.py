@@ -380,7 +380,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         }
     info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
             "sources": sources, "anchored": anchored, "slopes": slopes, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
-            "against": [str(d) for d in against], "results": results, "renders": renders,
+            "against": [str(d) for d in against], "results": results, "renders": renders + len(memo),
             "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
             "created": fit_info["created"], "command": fit_info.get("command")}
     with atomic_dir(out) as tmp:
