@@ -236,22 +236,6 @@ def _sources(paths):
     return merged, settings
 
 
-def _coefficients(renderer, scene, ref, mapping, settings, N, k, s):
-    """``(A, B, C)`` of Eq. (C1) for ``scene`` rendered with the family's ``mapping`` at ``sigma_scale = s``, or None
-    where the render has no image (no steady state, non-finite pixels)."""
-    from harness.calibration.fit import relmse_coefficients
-    from sslpv_gl.params import SSLPVParams
-
-    try:
-        img = renderer.render(scene, SSLPVParams(N=N, steps=k, mapping=mapping, sigma_scale=float(s), **settings))
-    except (ValueError, FloatingPointError):
-        return None
-    img, m = np.asarray(img.subsurface, dtype=np.float64), ref["mask"]
-    if not np.all(np.isfinite(img)):
-        return None
-    return relmse_coefficients(img[m].ravel(), np.asarray(ref["subsurface"], dtype=np.float64)[m].ravel())
-
-
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
              command="python -m harness.calibration.form", slopes="both"):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
@@ -284,13 +268,19 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
 
     if slopes not in SLOPES:
         raise InputError("--slopes", "slopes", f"unknown {slopes!r}", f"use one of: {', '.join(SLOPES)}")
-    memo = {}
+    # (F7)'s renders: the family's mapping at a fold's sigma_scale, memoised (failed renders left out) by the scan's
+    # own renderer of a calibration
+    from harness.calibration.fit import relmse_coefficients
+    from harness.calibration.scan import Scanner
+    from sslpv_gl.params import SSLPVParams
+
+    scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets)
 
     def at(n, N, k, s):
-        key = (n, N, k, float(s))
-        if key not in memo:
-            memo[key] = _coefficients(renderer, scenes[n], refs[n], cal["mapping"], settings, N, k, s)
-        return memo[key]
+        scanner.render(n, s, [(N, k)])
+        img, m = scanner.image((N, k), n, s), refs[n]["mask"]
+        return None if img is None else relmse_coefficients(img[m].ravel(),
+                                                            np.asarray(refs[n]["subsurface"], np.float64)[m].ravel())
 
     # 1.-2. terms, oracle, fits (in-sample: held=None)
     fits = {}
@@ -310,7 +300,8 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 t = radiance_targets(lambda n, s: at(n, N, k, s), [n for n in names if n != held],
                                      math.exp(anchor[0]))
                 folds[held] = fold_fits_radiance(names, X, t, held, anchor)
-                targets = targets or t
+                if held is None:
+                    targets = t
                 progress(f"{label}: radiance targets of the fold without {held or 'no scene'}")
             power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"])
         else:
@@ -380,7 +371,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         }
     info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
             "sources": sources, "anchored": anchored, "slopes": slopes, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
-            "against": [str(d) for d in against], "results": results, "renders": renders + len(memo),
+            "against": [str(d) for d in against], "results": results, "renders": renders + scanner.renders,
             "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
             "created": fit_info["created"], "command": fit_info.get("command")}
     with atomic_dir(out) as tmp:
