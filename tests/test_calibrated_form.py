@@ -9,7 +9,7 @@ import pytest
 
 from harness.calibration.form import (budget_terms, fold_anchor, fold_fits, fold_fits_radiance, form_toml,
                                      radiance_targets)
-from harness.calibration.form_fit import fit_form, ridge
+from harness.calibration.form_fit import fit_form, ridge, loo_testable_terms
 from harness.errors import InputError
 from sslpv_gl.calibrated import load_calibrated
 from sslpv_gl.material import MAPPINGS, lpv_material
@@ -269,6 +269,44 @@ class TestConditionalFit:
         X2, t2 = dict(X), dict(targets)
         X2["s2"], t2["s2"] = [50.0, -7.0, 9.0], 40.0
         assert fold_fits_radiance(names, X2, t2, "s2", anchor=(0.1, 0.2)) == a and "s2" not in a["scenes"]
+
+
+class TestTestableTerms:
+    """A term that one training scene alone sets apart gets no slope in the conditional form (Eq. F7)."""
+
+    def suite_like(self, rng, n=10):
+        """``n`` scenes: term 0 varies, term 1 is shared by all but ``odd``, whose target is far off (as
+        ``ln_extent_per_step`` and ``backlit_slab`` at K = 8 on the suite)."""
+        names = [f"s{i}" for i in range(n)]
+        X = {m: [float(rng.normal()), 1.322] for m in names}
+        X["odd"] = [float(rng.normal()), 1.253]
+        targets = {m: 0.2 * X[m][0] + float(rng.normal(0.0, 0.05)) for m in names}
+        targets["odd"] = 0.2 * X["odd"][0] + 3.3
+        return names + ["odd"], X, targets
+
+    def test_loo_testable_terms_rule(self):
+        X = np.array([[0.0, 1.0, 1.0, 5.0], [0.0, 1.0, 2.0, 5.0], [0.0, 2.0, 3.0, 5.0], [0.0, 2.0, 1.0, 6.0]])
+        assert list(loo_testable_terms(X)) == [False, True, True, False]
+
+    def test_a_term_one_scene_sets_apart_gets_no_slope(self):
+        names, X, targets = self.suite_like(np.random.default_rng(9))
+        f = fold_fits_radiance(names, X, targets, None, anchor=(0.1, 0.2))
+        assert f["radiance"][2] == 0.0
+
+    def test_a_held_out_scene_beyond_it_does_not_extrapolate(self):
+        """The held-out scene has its own value of the term, beyond the odd scene's (``thin_ring``): its
+        prediction stays within the training targets' range."""
+        names, X, targets = self.suite_like(np.random.default_rng(10))
+        X["beyond"], targets["beyond"] = [0.0, 1.179], 0.0
+        f = fold_fits_radiance(names + ["beyond"], X, targets, "beyond", anchor=(0.1, 0.0))
+        pred = f["radiance"][0] + np.dot(f["radiance"][1:], X["beyond"])
+        assert abs(pred) < 1.0
+
+    def test_two_scenes_that_share_a_value_keep_the_term(self):
+        names, X, targets = self.suite_like(np.random.default_rng(11))
+        X["odd2"], targets["odd2"] = [0.3, 1.253], 0.06 + 3.3
+        f = fold_fits_radiance(names + ["odd2"], X, targets, None, anchor=(0.1, 0.2))
+        assert f["radiance"][2] < -10.0     # two scenes set it apart: leave-one-out tests it
 
 
 class TestBadInputCommandLine:

@@ -33,11 +33,14 @@ its fold.
 ``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
 step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
 the render loss (C2) itself (:mod:`harness.calibration.form_fit`); the scene's oracle is the
-family's (one ``(s, r)`` per scene), so the form may beat it on a heterogeneous scene. The ridge
-penalty is on standardised coefficients, so a term that is nearly constant over the training scenes
-but for one (``ln_extent_per_step`` on the suite: eight scenes share one extent) gets a steep slope
-that fits that one scene; a held-out scene beyond it extrapolates far (the committed conditional
-form renders ``thin_ring`` held out at K = 8 and 16 many times too bright; its page gives the figures).
+family's (one ``(s, r)`` per scene), so the form may beat it on a heterogeneous scene.
+
+The conditional form gives a slope only to a term that leave-one-out can test
+(:func:`~harness.calibration.form_fit.loo_testable_terms`): on the suite at N = 32 nine scenes share one
+``ln_extent_per_step`` and ``backlit_slab`` and ``thin_ring`` each have their own, so in either one's fold
+the other alone sets the term apart. The ridge penalty is on standardised coefficients, and such a term
+got a slope steep enough to fit that one scene (-50 at K = 8); the held-out scene beyond it
+extrapolated many times too bright. The full form (F5) keeps every term that is not constant.
 """
 
 from __future__ import annotations
@@ -126,14 +129,15 @@ def radiance_targets(render_at, names, s):
 def fold_fits_radiance(names, X, targets, held, anchor):
     """Eq. (F7) on every scene but ``held``: ``sigma`` is the anchor's ``ln s`` with every slope 0; ``radiance``
     the ridge regression (F5) of ``targets`` (scene -> ln r at that ``s``, the training scenes' only) with its
-    level at the anchor's ``ln r`` (F6). Same dict as :func:`fold_fits`."""
+    level at the anchor's ``ln r`` (F6); only terms that leave-one-out can test on the training scenes get a
+    slope (:func:`~harness.calibration.form_fit.loo_testable_terms`). Same dict as :func:`fold_fits`."""
     from harness.calibration.form_fit import choose_lambda, ridge
 
     train = [n for n in names if n != held and n in targets]
     Xt = np.asarray([X[n] for n in train], dtype=np.float64)
     y = np.asarray([targets[n] for n in train], dtype=np.float64)
-    lam = choose_lambda(Xt, (y,))
-    _, b = ridge(Xt, y, lam)
+    lam = choose_lambda(Xt, (y,), testable=True)
+    _, b = ridge(Xt, y, lam, testable=True)
     b0 = float(anchor[1] - Xt.mean(axis=0) @ b)
     return {"sigma": [float(anchor[0])] + [0.0] * Xt.shape[1], "radiance": [b0, *map(float, b)], "lam": lam,
             "scenes": train}
@@ -303,7 +307,8 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 if held is None:
                     targets = t
                 progress(f"{label}: radiance targets of the fold without {held or 'no scene'}")
-            power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"])
+            power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"],
+                                                   testable=True)
         else:
             folds = {held: fold_fits(names, X, ln_s, ln_r, held, fold_anchor(res, held) if anchored else None)
                      for held in [None, *names]}

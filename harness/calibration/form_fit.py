@@ -13,7 +13,11 @@ standardised coefficients; ``a0`` is not penalised), the same for ``ln r``. ``la
 from :data:`LAMBDAS` by leave-one-out on the training scenes alone (:func:`choose_lambda`),
 so a held-out scene never enters its own fit, not even through ``lam``. A term that is
 constant over the training scenes (``ln_eta`` on an index-matched suite) is not identifiable:
-its coefficient is 0.
+its coefficient is 0. With ``testable`` (the conditional form, Eq. F7, uses it) so is the coefficient of a
+term that leave-one-out cannot test: one whose spread vanishes when some single training scene is left out,
+i.e. one scene alone sets it apart (:func:`loo_testable_terms`). Standardising divides that term by its small
+spread, so its slope may be steep enough to fit that one scene at any penalty; a scene beyond it then
+extrapolates far.
 
 The form's level can instead be anchored to the family's scalar pair ``(s*, r*)`` fitted on the
 render loss (C2) of the same training scenes (:func:`fit_form` ``anchor``)::
@@ -32,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LAMBDAS", "ridge", "choose_lambda", "fit_form", "predict", "predictive_power"]
+__all__ = ["LAMBDAS", "loo_testable_terms", "ridge", "choose_lambda", "fit_form", "predict", "predictive_power"]
 
 #: The ridge penalties (F5) that leave-one-out chooses from.
 LAMBDAS = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
@@ -40,12 +44,24 @@ LAMBDAS = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0)
 MIN_SPREAD = 1e-9
 
 
-def ridge(X, y, lam):
-    """Eq. (F5) -> ``(a0, a)``: ``X`` (n, k) scene-level terms, ``y`` (n,) targets, ``lam`` >= 0."""
+def loo_testable_terms(X):
+    """The terms (k,) bool that leave-one-out can test: their spread over the scenes ``X`` (n, k) stays above
+    :data:`MIN_SPREAD` with any one scene left out (at least three distinct values, or two values each taken
+    by two scenes or more)."""
+    X = np.asarray(X, dtype=np.float64)
+    use = X.std(axis=0) > MIN_SPREAD
+    for i in range(X.shape[0]):
+        use &= np.delete(X, i, axis=0).std(axis=0) > MIN_SPREAD
+    return use
+
+
+def ridge(X, y, lam, testable=False):
+    """Eq. (F5) -> ``(a0, a)``: ``X`` (n, k) scene-level terms, ``y`` (n,) targets, ``lam`` >= 0; ``testable``:
+    only the terms of :func:`loo_testable_terms` get a slope (else every term that is not constant)."""
     X, y = np.asarray(X, dtype=np.float64), np.asarray(y, dtype=np.float64)
     mx, my = X.mean(axis=0), y.mean()
     sd = X.std(axis=0)
-    use = sd > MIN_SPREAD
+    use = loo_testable_terms(X) if testable else sd > MIN_SPREAD
     a = np.zeros(X.shape[1])
     if use.any():
         Z = (X[:, use] - mx[use]) / sd[use]
@@ -58,28 +74,28 @@ def predict(a0, a, X):
     return a0 + np.asarray(X, dtype=np.float64) @ np.asarray(a, dtype=np.float64)
 
 
-def _loo_error(X, y, lam):
+def _loo_error(X, y, lam, testable=False):
     err = 0.0
     for i in range(len(y)):
         keep = np.arange(len(y)) != i
-        a0, a = ridge(X[keep], y[keep], lam)
+        a0, a = ridge(X[keep], y[keep], lam, testable)
         err += float((predict(a0, a, X[i:i + 1])[0] - y[i]) ** 2)
     return err / len(y)
 
 
-def predictive_power(X, y, lam):
+def predictive_power(X, y, lam, testable=False):
     """How well the terms predict a target: ``{"sd", "loo_rmse"}``, the targets' standard deviation and the
     root mean square leave-one-out error of (F5) at ``lam`` (a ``loo_rmse`` near ``sd`` predicts nothing
     beyond the mean). A diagnostic of the regression; no held-out figure comes from it."""
     X, y = np.asarray(X, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    return {"sd": float(y.std()), "loo_rmse": float(np.sqrt(_loo_error(X, y, lam)))}
+    return {"sd": float(y.std()), "loo_rmse": float(np.sqrt(_loo_error(X, y, lam, testable)))}
 
 
-def choose_lambda(X, Ys, lambdas=LAMBDAS):
+def choose_lambda(X, Ys, lambdas=LAMBDAS, testable=False):
     """The ``lam`` of :data:`LAMBDAS` with the least leave-one-out squared error, summed over the targets
-    ``Ys`` (here ``ln s`` and ``ln r``), on these scenes alone."""
+    ``Ys`` (here ``ln s`` and ``ln r``), on these scenes alone (``testable`` as in :func:`ridge`)."""
     X = np.asarray(X, dtype=np.float64)
-    errs = [sum(_loo_error(X, np.asarray(y, dtype=np.float64), lam) for y in Ys) for lam in lambdas]
+    errs = [sum(_loo_error(X, np.asarray(y, dtype=np.float64), lam, testable) for y in Ys) for lam in lambdas]
     return float(lambdas[int(np.argmin(errs))])
 
 
