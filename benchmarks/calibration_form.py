@@ -11,7 +11,7 @@ Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and 
 
 It computes nothing: every figure is the form's own (the scalar family's as the form's report copied them). ``--write`` puts the tables on the
 page ``docs/benchmarks/calibration_form_<family>.md`` (``..._radiance.md`` for a form fitted with
-``--slopes radiance``, Eq. F7; ``benchmarks/page.py``).
+``--slopes radiance``, Eq. F7, ``..._loss.md`` for ``--slopes loss``, Eq. F8; ``benchmarks/page.py``).
 
 Run: ``.venv/bin/python benchmarks/calibration_form.py DIR [--write]``
 """
@@ -41,10 +41,11 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     form = json.loads(path.read_text())
-    radiance = form.get("slopes", "both") == "radiance"
-    page = Page(f"calibration_form_{form['family']}" + ("_radiance" if radiance else ""),
+    slopes = form.get("slopes", "both")
+    page = Page(f"calibration_form_{form['family']}" + ("" if slopes == "both" else f"_{slopes}"),
                 f"The calibration of the {form['family']} family as a form of the material"
-                + (": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)" if radiance else ""))
+                + {"both": "", "radiance": ": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)",
+                   "loss": ": both scales per cell, fitted on the render loss (Eq. F8)"}[slopes])
     with page.capture(markdown=True):
         _tables(form)
     page.finish(args.write)
@@ -89,6 +90,9 @@ def _tables(form):
         print(f"how well the terms predict the scenes' own optima (Eq. F5, leave-one-out over all scenes at that "
               f"penalty): ln s spread {p['ln_s']['sd']:.3g}, error {p['ln_s']['loo_rmse']:.3g}; ln r spread "
               f"{p['ln_r']['sd']:.3g}, error {p['ln_r']['loo_rmse']:.3g}")
+        if "loss" in p:
+            print(f"how much the terms help in the loss itself (Eq. F8, mean leave-one-out ln relMSE at that penalty): "
+                  f"form {p['loss']['form']:.3g}, scalar calibration {p['loss']['scalar']:.3g}")
         if "ln_r_at_s" in p:
             print(f"how well the terms predict each scene's best ln r at the scalar sigma_scale (Eq. F7, the targets of "
                   f"this fit): spread {p['ln_r_at_s']['sd']:.3g}, error {p['ln_r_at_s']['loo_rmse']:.3g}")

@@ -421,4 +421,7 @@ def test_study_names_a_form_apart_from_its_scalar_family(tmp_path):
     assert study_label(f"calibrated:{conditional}") == "calibrated collision radiance form"
     mixed = write_v3(tmp_path / "m.toml", [(32, 8, [0.3, 0, 0, 0, 0, 0], RADIANCE), (32, 16, SIGMA, RADIANCE)])
     assert study_label(f"calibrated:{mixed}") == "calibrated collision form"
+    loss = tmp_path / "l.toml"
+    loss.write_text(form_toml("collision", SETTINGS, [(32, 8, TERMS, SIGMA, RADIANCE)], {"loss": "t", "slopes": "loss"}))
+    assert study_label(f"calibrated:{loss}") == "calibrated collision loss form"
     assert study_label("collision") == "collision"

@@ -30,6 +30,12 @@ regressed on the terms as in (F5) and anchored at the fold's scalar ``r`` as in 
 of a training scene at its fold's ``s`` (:func:`radiance_targets`), so nothing of the held-out scene reaches
 its fold.
 
+With ``slopes = "loss"`` (``--slopes loss``) both scales' coefficients are fitted on the render loss (C2) itself,
+through each scene's images at the calibration's scan of ``sigma_scale`` and their spline (Eq. F8,
+:mod:`harness.calibration.form_loss`): no oracle and no anchor, so the scenes' valleys in ``(ln s, ln r)``
+trade off as the loss says. It renders every scene at every scanned ``sigma_scale`` once more (the scan
+of ``sslpv-harness calibrate``, whose images a calibration does not keep).
+
 ``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
 step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
 the render loss (C2) itself (:mod:`harness.calibration.form_fit`); the scene's oracle is the
@@ -63,12 +69,14 @@ from harness.calibration.scan import budget_label
 from harness.errors import InputError
 
 __all__ = ["scene_terms", "budget_terms", "fold_fits", "fold_anchor", "radiance_targets", "fold_fits_radiance",
+           "fold_fits_loss",
            "form_toml", "run_form", "FORM_RELMSE_FACTOR", "SLOPES", "main"]
 
 #: Target: median held-out relMSE at most this times the best calibrated family's at the budget.
 FORM_RELMSE_FACTOR = 0.5
-#: Which scales depend on the material: both (F5, on the oracle) or the radiance scale alone (F7).
-SLOPES = ("both", "radiance")
+#: Which scales depend on the material: both (F5, on the oracle), the radiance scale alone (F7), or both fitted on
+#: the render loss itself (F8).
+SLOPES = ("both", "radiance", "loss")
 
 
 def budget_terms(steps):
@@ -141,6 +149,20 @@ def fold_fits_radiance(names, X, targets, held, anchor):
     b0 = float(anchor[1] - Xt.mean(axis=0) @ b)
     return {"sigma": [float(anchor[0])] + [0.0] * Xt.shape[1], "radiance": [b0, *map(float, b)], "lam": lam,
             "scenes": train}
+
+
+def fold_fits_loss(names, X, tables, u_grid, held):
+    """Eq. (F8) on every scene but ``held`` (None: on all): both scales' coefficients fitted on the render loss
+    (C2) through each training scene's table (``tables``: scene -> (A, B, C) on ``u_grid``,
+    :func:`~harness.calibration.form_loss.scene_table`; a scene without one is left out), ``lam`` by
+    leave-one-out on the training scenes alone. Same dict as :func:`fold_fits`."""
+    from harness.calibration.form_loss import choose_lambda_loss, fit_loss_form
+
+    train = [n for n in names if n != held and n in tables]
+    Xt, tabs = [X[n] for n in train], [tables[n] for n in train]
+    lam = choose_lambda_loss(Xt, u_grid, tabs)
+    sigma, radiance = fit_loss_form(Xt, u_grid, tabs, lam)
+    return {"sigma": sigma, "radiance": radiance, "lam": lam, "scenes": train}
 
 
 def form_toml(family, settings, budgets, fit_info):
@@ -243,8 +265,8 @@ def _sources(paths):
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
              command="python -m harness.calibration.form", slopes="both"):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
-    family whose budgets are taken together; module docstring) -> the report dict. ``slopes``: ``"both"`` (F5) or
-    ``"radiance"`` (F7, always anchored)."""
+    family whose budgets are taken together; module docstring) -> the report dict. ``slopes``: ``"both"`` (F5),
+    ``"radiance"`` (F7, always anchored) or ``"loss"`` (F8: the levels from the loss, never anchored)."""
     from harness.io.atomic import _check_replaceable, atomic_dir
     from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
@@ -286,6 +308,15 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         return None if img is None else relmse_coefficients(img[m].ravel(),
                                                             np.asarray(refs[n]["subsurface"], np.float64)[m].ravel())
 
+    if slopes == "loss":                                                            # (F8): the calibration's scan
+        from harness.calibration.form_loss import loss_power, scan_grid, scene_table
+
+        u_grid = scan_grid(cal["sigma_scan"])
+        for n in names:
+            for s in cal["sigma_scan"]:
+                scanner.render(n, s)
+            progress(f"scanned {n} at every sigma_scale of the calibration's scan")
+
     # 1.-2. terms, oracle, fits (in-sample: held=None)
     fits = {}
     for N, k in budgets:
@@ -309,12 +340,24 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 progress(f"{label}: radiance targets of the fold without {held or 'no scene'}")
             power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"],
                                                    testable=True)
+        elif slopes == "loss":                                                      # (F8)
+            tables = {n: scene_table(scanner.samples[((N, k), n)], u_grid) for n in names
+                      if len(scanner.samples[((N, k), n)].u) >= 3}
+            folds = {}
+            for held in [None, *names]:
+                folds[held] = fold_fits_loss(names, X, tables, u_grid, held)
+                progress(f"{label}: the loss form fitted without {held or 'no scene'}")
+            power["loss"] = loss_power([X[n] for n in tables], u_grid, list(tables.values()), folds[None]["lam"])
         else:
             folds = {held: fold_fits(names, X, ln_s, ln_r, held, fold_anchor(res, held) if anchored else None)
                      for held in [None, *names]}
         fits[label] = {"terms": terms, "X": X, "power": power, "folds": folds}
 
-    if slopes == "radiance":
+    if slopes == "loss":
+        anchored = False
+        loss = ("both scales' coefficients fitted on the render loss (Eq. C2) through the scan's interpolated images "
+                "(Eq. F8 of harness.calibration.form_loss), ridge penalty by leave-one-out")
+    elif slopes == "radiance":
         anchored = True
         loss = ("sigma_scale: the source's scalar fit; ln r: ridge regression (Eq. F5 of harness.calibration.form_fit)"
                 " of each training scene's best ln r at that sigma_scale (Eq. F7 of harness.calibration.form), level "
@@ -415,7 +458,8 @@ def main(argv=None):
     ap.add_argument("--free-level", action="store_true", help="the regression's own a0 and b0 (Eq. F5), not the "
                     "source's scalar pair (Eq. F6)")
     ap.add_argument("--slopes", choices=SLOPES, default="both", help="both scales from the material (Eq. F5, on the "
-                    "oracle), or the radiance scale alone at the scalar sigma_scale (Eq. F7)")
+                    "oracle), the radiance scale alone at the scalar sigma_scale (Eq. F7), or both fitted on the render "
+                    "loss (Eq. F8)")
     args = ap.parse_args(argv)
     try:
         info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level, argv=argv,

@@ -74,7 +74,8 @@ class StudyFile(InputModel):
 def study_label(mapping):
     """A calibrated mapping's family name for tables (``calibrated diffusion``; ``calibrated collision form``
     for a file whose scales are a per-cell form, :mod:`sslpv_gl.material_form`; ``calibrated collision radiance
-    form`` where only its radiance scale is, Eq. F7 of :mod:`harness.calibration.form`), else the mapping."""
+    form`` where only its radiance scale is, Eq. F7 of :mod:`harness.calibration.form`; ``calibrated collision loss
+    form`` for one fitted on the render loss, Eq. F8 of :mod:`harness.calibration.form_loss`), else the mapping."""
     m = str(mapping)
     if not m.startswith("calibrated:"):
         return m
@@ -86,6 +87,8 @@ def study_label(mapping):
         forms = [b.form for b in cal.budgets if b.form is not None]
         if not forms:
             return f"calibrated {cal.family}"
+        if cal.fit.get("slopes") == "loss":
+            return f"calibrated {cal.family} loss form"
         return f"calibrated {cal.family}" + (" radiance" if not any(any(f.sigma) for f in forms) else "") + " form"
     except InputError:
         return "calibrated " + Path(m.split(":", 1)[1]).parent.name
