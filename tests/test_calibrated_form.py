@@ -340,7 +340,8 @@ class TestCommittedForm:
     @pytest.mark.gl
     @pytest.mark.slow
     @pytest.mark.parametrize("folder_name", ["baselines/calibrated/collision_form",
-                                             "baselines/calibrated/collision_radiance_form"])
+                                             "baselines/calibrated/collision_radiance_form",
+                                             "baselines/calibrated/collision_loss_form"])
     def test_in_sample_and_held_out_figures_are_single_renders(self, tmp_path, folder_name):
         import json
         from pathlib import Path
