@@ -17,8 +17,9 @@ interpolated linearly, which keeps ``A C >= B^2`` (a convex combination of quadr
 never negative is never negative).
 
 With every slope 0, (F8) is the scalar calibration (C2), so ``lam -> inf`` gives it back; the levels
-``a0, b0`` need no anchor (F6). The optimiser starts there (the scalar optimum on the table's grid), so the
-result is the local minimum nearest the scalar fit. ``lam`` is chosen from
+``a0, b0`` need no anchor (F6). The optimiser (L-BFGS with the analytic gradient; Powell's method where its
+line search fails on a kink of the interpolated loss) starts there (the scalar optimum on the table's grid),
+so the result is the local minimum nearest the scalar fit. ``lam`` is chosen from
 :data:`~harness.calibration.form_fit.LAMBDAS` by leave-one-out on the training scenes alone: each training
 scene's ``ln relMSE`` at the ``(u, v)`` the others' fit predicts for it (:func:`choose_lambda_loss`). Only
 the terms that leave-one-out can test get a slope
@@ -43,7 +44,7 @@ from harness.calibration.form_fit import LAMBDAS, loo_testable_terms
 
 __all__ = ["U_POINTS", "scan_grid", "scene_table", "table_loss", "fit_loss_form", "choose_lambda_loss", "loss_power"]
 
-#: Points of the fine ``u`` grid on which :func:`scan_grid` evaluates (A, B, C) from the interpolated images.
+#: Points of the fine ``u`` grid (:func:`scan_grid`) on which :func:`scene_table` evaluates (A, B, C).
 U_POINTS = 193
 #: relMSE below this is taken as this (the log stays finite).
 Q_FLOOR = 1e-12
