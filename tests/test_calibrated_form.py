@@ -309,6 +309,16 @@ class TestTestableTerms:
         assert f["radiance"][2] < -10.0     # two scenes set it apart: leave-one-out tests it
 
 
+def test_command_line_offers_every_form():
+    """``sslpv-harness calibrate-form --slopes`` takes exactly the forms :func:`run_form` fits."""
+    from harness.calibration.form import SLOPES
+    from harness.cli.main import build_parser, walk
+
+    parser = next(p for path, p in walk(build_parser()) if path == ("calibrate-form",))
+    action = next(a for a in parser._actions if "--slopes" in a.option_strings)
+    assert tuple(action.choices) == SLOPES
+
+
 class TestBadInputCommandLine:
     """Through ``sslpv-harness render``: exit 2, one line, nothing left behind."""
 

@@ -44,7 +44,7 @@ class TestTable:
         grid = np.log(np.asarray(SCAN))                  # the scan's own samples as the grid
         tab = scene_table(smp, grid)
         mask = np.ones(ref.shape[:2], bool)
-        for j, s in enumerate(SCAN[2:9:3], start=2):
+        for s in SCAN[2:9:3]:
             for r in (0.5, 1.3):
                 want = compute("relmse", r * images[s], ref, mask).value
                 got = table_loss(grid, tab, math.log(s), math.log(r))[0]

@@ -147,17 +147,23 @@ def _predict(coeffs, x):
     return coeffs[0] + float(np.dot(coeffs[1:], x))
 
 
-def _loo_losses(X, u_grid, tabs, lam):
+def _loo_starts(u_grid, tabs):
+    """For each scene, the scalar calibration of the others on the table (:func:`_scalar_start`): the start of
+    its leave-one-out fit at every ``lam``, and the scalar's own leave-one-out prediction."""
+    return [_scalar_start(u_grid, [t for j, t in enumerate(tabs) if j != i]) for i in range(len(tabs))]
+
+
+def _loo_losses(X, u_grid, tabs, lam, starts):
     """Each scene's ln relMSE at the ``(u, v)`` that (F8) on the others predicts for it (``lam = None``: every
-    slope 0, the scalar calibration of the others)."""
+    slope 0, the scalar calibration of the others); ``starts`` from :func:`_loo_starts`."""
     X = np.asarray(X, dtype=np.float64)
     out = []
     for i in range(len(tabs)):
         keep = [j for j in range(len(tabs)) if j != i]
         if lam is None:
-            u, v = _scalar_start(u_grid, [tabs[j] for j in keep])
+            u, v = starts[i]
         else:
-            s, r = fit_loss_form(X[keep], u_grid, [tabs[j] for j in keep], lam)
+            s, r = fit_loss_form(X[keep], u_grid, [tabs[j] for j in keep], lam, start=starts[i])
             u, v = _predict(s, X[i]), _predict(r, X[i])
         out.append(table_loss(u_grid, tabs[i], u, v)[0])
     return out
@@ -165,7 +171,8 @@ def _loo_losses(X, u_grid, tabs, lam):
 
 def choose_lambda_loss(X, u_grid, tabs, lambdas=LAMBDAS):
     """The ``lam`` of ``lambdas`` with the least summed leave-one-out ln relMSE on these scenes alone."""
-    errs = [sum(_loo_losses(X, u_grid, tabs, lam)) for lam in lambdas]
+    starts = _loo_starts(u_grid, tabs)
+    errs = [sum(_loo_losses(X, u_grid, tabs, lam, starts)) for lam in lambdas]
     return float(lambdas[int(np.argmin(errs))])
 
 
@@ -173,5 +180,6 @@ def loss_power(X, u_grid, tabs, lam):
     """How much the terms help, in the loss itself: ``{"form", "scalar"}``, the mean leave-one-out ln relMSE
     of (F8) at ``lam`` and of the scalar calibration (every slope 0). A diagnostic; no held-out figure
     comes from it."""
-    return {"form": float(np.mean(_loo_losses(X, u_grid, tabs, lam))),
-            "scalar": float(np.mean(_loo_losses(X, u_grid, tabs, None)))}
+    starts = _loo_starts(u_grid, tabs)
+    return {"form": float(np.mean(_loo_losses(X, u_grid, tabs, lam, starts))),
+            "scalar": float(np.mean(_loo_losses(X, u_grid, tabs, None, starts)))}
