@@ -263,10 +263,11 @@ def _sources(paths):
 
 
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
-             command="python -m harness.calibration.form", slopes="both"):
+             command="python -m harness.calibration.form", slopes="both", cache=True):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
     family whose budgets are taken together; module docstring) -> the report dict. ``slopes``: ``"both"`` (F5),
-    ``"radiance"`` (F7, always anchored) or ``"loss"`` (F8: the levels from the loss, never anchored)."""
+    ``"radiance"`` (F7, always anchored) or ``"loss"`` (F8: the levels from the loss, never anchored). ``cache``: the
+    scan's renders through the result cache (:func:`harness.calibration.scan.scan_cache`), False to render them all."""
     from harness.io.atomic import _check_replaceable, atomic_dir
     from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
@@ -297,10 +298,12 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     # (F7)'s renders: the family's mapping at a fold's sigma_scale, memoised (failed renders left out) by the scan's
     # own renderer of a calibration
     from harness.calibration.fit import relmse_coefficients
-    from harness.calibration.scan import Scanner
+    from harness.calibration.scan import Scanner, scan_cache
     from sslpv_gl.params import SSLPVParams
 
-    scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets)
+    results_cache = scan_cache(cache)
+    scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets,
+                      cache=results_cache)
 
     def at(n, N, k, s):
         scanner.render(n, s, [(N, k)])
@@ -420,8 +423,11 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     info = {"format": "sslpv-calibration-form-report", "family": cal["family"], "mapping": cal["mapping"],
             "sources": sources, "anchored": anchored, "slopes": slopes, "loss": fit_info["loss"], "settings": settings, "scenes": names, "budgets": [list(b) for b in budgets],
             "against": [str(d) for d in against], "results": results, "renders": renders + scanner.renders,
+            "served_from_cache": scanner.served,
             "time": {"wall_s": time.perf_counter() - t0}, "gl_renderer": renderer.gl_renderer,
             "created": fit_info["created"], "command": fit_info.get("command")}
+    if results_cache is not None:
+        results_cache.prune()
     with atomic_dir(out) as tmp:
         (tmp / "calibrated.toml").write_text(toml_for(None))
         load_calibrated(tmp / "calibrated.toml", tuple(MAPPINGS))        # what we write must read back
@@ -460,10 +466,13 @@ def main(argv=None):
     ap.add_argument("--slopes", choices=SLOPES, default="both", help="both scales from the material (Eq. F5, on the "
                     "oracle), the radiance scale alone at the scalar sigma_scale (Eq. F7), or both fitted on the render "
                     "loss (Eq. F8)")
+    ap.add_argument("--no-cache", action="store_true", help="render the scan afresh instead of serving it from the "
+                    "result cache (cache/results/)")
     args = ap.parse_args(argv)
     try:
         info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level, argv=argv,
-                        progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes)
+                        progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes,
+                        cache=not args.no_cache)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

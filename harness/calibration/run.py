@@ -39,7 +39,7 @@ import numpy as np
 
 from harness.calibration.families import COMPARED, family as get_family
 from harness.calibration.fit import best_scale, fit, fit_refined, halves_se
-from harness.calibration.scan import Scanner, budget_label
+from harness.calibration.scan import Scanner, budget_label, scan_cache
 from harness.errors import InputError
 
 __all__ = ["run_calibrate", "parse_budgets", "ENERGY_TARGET", "RELMSE_TARGET_FACTOR"]
@@ -164,11 +164,13 @@ def _noise(ref):
 # ----------------------------------------------------------------------------- the run
 
 def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS, steps=DEFAULT_STEPS, size=None,
-                  sigma_range=None, points=11, settings=None, progress=True, renderer=None, argv=None):
+                  sigma_range=None, points=11, settings=None, progress=True, renderer=None, argv=None, cache=True):
     """Calibrate ``family`` on ``scenes`` at the budgets ``grids x steps`` and write ``out``.
 
     Returns the summary that ``--json`` prints (paths written, fitted values, targets, times).
     ``settings`` overrides the family's renderer settings (:data:`sslpv_gl.calibrated.SETTINGS`).
+    ``cache``: serve and store the renders through the result cache (:func:`harness.runs.cache.open_cache`'s
+    argument; :mod:`harness.calibration.scan`), False to render everything.
     """
     from harness.io.atomic import _check_replaceable
     from harness.progress import Progress
@@ -211,7 +213,9 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
     planned = len(names) * (len(s_values) * n_groups + 3 * len(budgets)) + len(COMPARED) * len(names) * n_groups
     phases = {}
     with Progress(f"calibrate {fam.name}", total=planned, unit="renders", enabled=progress) as prog:
-        scanner = Scanner(renderer, scene_objs, refs, base, budgets, prog, label=f"{fam.name} family")
+        results_cache = scan_cache(cache)
+        scanner = Scanner(renderer, scene_objs, refs, base, budgets, prog, label=f"{fam.name} family",
+                          cache=results_cache)
 
         # 1. the scan
         t0 = time.perf_counter()
@@ -229,18 +233,22 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
 
         # 4. the fixed mappings at the same budgets
         t0 = time.perf_counter()
-        compared, compare_renders = {}, 0
+        compared, compare_renders, served = {}, 0, scanner.served
         for mapping, over in COMPARED.items():
-            cs = Scanner(renderer, scene_objs, refs, base.replace(mapping=mapping, **over), budgets, prog)
+            cs = Scanner(renderer, scene_objs, refs, base.replace(mapping=mapping, **over), budgets, prog,
+                         cache=results_cache)
             for n in names:
                 cs.render(n, 1.0)
             compare_renders += cs.renders
+            served += cs.served
             for b in budgets:
                 compared.setdefault(budget_label(*b), {})[mapping] = {
                     n: (_figures(cs.image(b, n, 1.0), refs[n], 1.0) if cs.image(b, n, 1.0) is not None
                         else {"relmse": None, "energy_ratio": None, "failed": _failure(cs, n, b)})
                     for n in names}
         phases["compare_s"] = time.perf_counter() - t0
+    if results_cache is not None:
+        results_cache.prune()
 
     for label, res in results.items():
         res["compared"] = compared[label]
@@ -257,7 +265,8 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
                 "of harness.calibration.fit)",
         "results": results, "compared_settings": COMPARED,
         "render_failures": [list(f) for f in scanner.failures],
-        "renders": scanner.renders + compare_renders, "render_seconds": scanner.seconds,
+        "renders": scanner.renders + compare_renders, "served_from_cache": served,
+        "render_seconds": scanner.seconds,
         "time": dict(phases, wall_s=wall), "gl_renderer": renderer.gl_renderer,
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "command": "sslpv-harness " + " ".join(argv) if argv else None,
@@ -436,14 +445,16 @@ def _summary(out, info):
                           "energy_met": t["energy_met"], "relmse_met": t["relmse_met"]}
     return {"out": str(out), "mapping_file": str(out / "calibrated.toml"), "report": str(out / "index.html"),
             "family": info["family"], "scenes": info["scenes"], "budgets": budgets,
-            "renders": info["renders"], "wall_s": info["time"]["wall_s"]}
+            "renders": info["renders"], "served_from_cache": info.get("served_from_cache", 0),
+            "wall_s": info["time"]["wall_s"]}
 
 
 def print_summary(summary, stream=None):
     """The human-readable table of a calibration (the command's output without --json)."""
     stream = stream or sys.stdout
     lines = [f"calibrated {summary['family']} on {len(summary['scenes'])} scenes in {summary['wall_s']:.0f} s "
-             f"({summary['renders']} renders): {summary['mapping_file']}",
+             f"({summary['renders']} renders, {summary.get('served_from_cache', 0)} images from the result cache): "
+             f"{summary['mapping_file']}",
              f"{'budget':<18} {'sigma_scale':>16} {'radiance_scale':>18} {'held-out relMSE':>16} targets"]
     for label, b in summary["budgets"].items():
         med = b["median_held_out_relmse"]

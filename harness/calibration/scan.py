@@ -7,21 +7,48 @@ with the fewest GL calls: for one grid ``N`` the integer step counts come from O
 rendering each count alone), and ``steps = "steady"`` is its own solve. Each result goes
 into the :class:`~harness.calibration.fit.SceneSamples` of its (budget, scene), and the
 subsurface image itself is kept for the figures that are computed from full images.
+
+With a result cache (:class:`harness.runs.cache.ResultCache`; ``cache/results/`` unless
+``$SSLPV_RESULT_CACHE``), each ``(scene, N, steps, sigma_scale)`` image is looked up before it is
+rendered and stored after, so a calibration run again, or a form fitted from a calibration's scan
+(:mod:`harness.calibration.form`), renders only what no earlier run rendered. Its key is the
+result cache's (:func:`harness.runs.cache.result_key`: the method's code, the scene's content hash,
+every parameter, the GL renderer string, the package versions) with the parameters marked as a
+scan's, so a scan's entry is never served to a sweep (whose entries carry a worker's timings and
+diagnostics, which a scan does not keep) nor the reverse. Keying each step count alone is exact
+because a grouped propagation is bit-identical to rendering each count alone.
+
+Limits: a render that failed (no steady state, non-finite pixels) is not stored and is tried again;
+the cache's own limits hold (an entry that cannot be read or does not match its hash is rendered
+again, with one line saying why).
 """
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
 
 from harness.calibration.fit import SceneSamples
 
-__all__ = ["Scanner", "budget_label"]
+__all__ = ["Scanner", "budget_label", "scan_cache"]
 
 
 def budget_label(N, steps):
     return f"N={N} steps={steps}"
+
+
+def scan_cache(cache):
+    """The result cache of a scan: ``True`` the default folder (an entry it does not serve says why in one
+    line on stderr), a :class:`~harness.runs.cache.ResultCache` itself, ``False`` or ``None`` none."""
+    from harness.runs.cache import ResultCache
+
+    if cache is False or cache is None:
+        return None
+    if isinstance(cache, ResultCache):
+        return cache
+    return ResultCache(log=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 class Scanner:
@@ -32,8 +59,10 @@ class Scanner:
     :class:`harness.progress.Progress`) is advanced once per scene render.
     """
 
-    def __init__(self, renderer, scenes, refs, base, budgets, progress=None, label=None):
+    def __init__(self, renderer, scenes, refs, base, budgets, progress=None, label=None, cache=None):
         self.renderer, self.scenes, self.refs, self.base = renderer, scenes, refs, base
+        self.cache = cache                # a ResultCache, or None: render everything
+        self.served = 0                   # images served by the cache
         self.label = label or base.mapping              # names the renders in the progress lines
         self.budgets = list(budgets)
         self.progress = progress
@@ -58,7 +87,7 @@ class Scanner:
     def render(self, name, s, budgets=None):
         """Render scene ``name`` at ``sigma_scale = s`` for ``budgets`` (default: all), unless done before."""
         s = float(s)
-        want = [b for b in (budgets or self.budgets) if (b, name, s) not in self.images]
+        want = [b for b in (budgets or self.budgets) if (b, name, s) not in self.images and not self._serve(name, b, s)]
         by_n = {}
         for N, steps in want:
             by_n.setdefault(N, []).append(steps)
@@ -69,6 +98,28 @@ class Scanner:
                 self._run(name, s, N, ints)
             for k in modes:
                 self._run(name, s, N, [k])
+
+    def _key(self, name, N, steps, s):
+        from harness.runs.cache import result_key
+
+        params = self.base.replace(N=N, steps=steps, sigma_scale=s).as_dict() | {"use": "calibration scan"}
+        return result_key("sslpv", self.scenes[name].content_hash, params, None,
+                          getattr(self.renderer, "gl_renderer", "unknown"))
+
+    def _keep(self, name, budget, s, img):
+        self.images[(budget, name, s)] = img
+        self.samples[(budget, name)].add(s, img[self.refs[name]["mask"]].ravel())
+
+    def _serve(self, name, budget, s):
+        """Take ``(budget, name, s)`` from the cache -> True, or False (not there, or no cache)."""
+        if self.cache is None:
+            return False
+        got = self.cache.get(self._key(name, *budget, s), label=f"{name} {budget_label(*budget)} sigma_scale={s:.4g}")
+        if got is None:
+            return False
+        self._keep(name, budget, s, np.asarray(got["images"]["subsurface"], dtype=np.float64))
+        self.served += 1
+        return True
 
     def image(self, budget, name, s):
         return self.images.get((budget, name, float(s)))
@@ -95,12 +146,15 @@ class Scanner:
                                          f"sigma_scale={s:.4g}")
         if results is None:
             return
-        mask = self.refs[name]["mask"]
         for k, res in zip(steps_list, results):
             img = np.asarray(res.subsurface, dtype=np.float64)
             if not np.all(np.isfinite(img)):
                 self.failures.append((name, (N, k), s, f"{int(np.count_nonzero(~np.isfinite(img)))} non-finite "
                                       "pixels"))
                 continue
-            self.images[((N, k), name, s)] = img
-            self.samples[((N, k), name)].add(s, img[mask].ravel())
+            self._keep(name, (N, k), s, img)
+            if self.cache is not None:
+                self.cache.put(self._key(name, N, k, s), {
+                    "status": "ok", "images": {"subsurface": res.subsurface, "full": res.full}, "mask": res.mask,
+                    "gl_renderer": res.gl_renderer, "steps_used": res.steps_used, "diagnostics": res.diagnostics,
+                    "warnings": list(res.warnings), "timings": res.timings_ms})

@@ -1,6 +1,6 @@
 """``sslpv-harness calibrate --family F --out DIR``: fit a mapping family to the references, per budget."""
 
-from harness.cli.options import add_out, add_progress, add_scenes, add_size
+from harness.cli.options import add_no_cache, add_out, add_progress, add_scenes, add_size
 from harness.errors import InputError
 
 HELP = "fit a mapping family's sigma_scale and radiance_scale to the references, per (N, steps) budget"
@@ -33,6 +33,7 @@ def configure(sp):
     sp.add_argument("--phase-scaling", dest="phase_scaling", metavar="MODE", help="renderer setting of the fit, an "
                     "extension: none | delta-eddington (default: the family's, none)")
     add_progress(sp)
+    add_no_cache(sp)
 
 
 def _numbers(flag, text, kind):
@@ -78,5 +79,5 @@ def run(args):
                             scenes=resolve_scenes(args.scenes) if args.scenes else None,
                             grids=_numbers("--grid", args.grid, int), steps=_steps(args.steps),
                             size=tuple(size) if size else None, sigma_range=rng, points=points[0],
-                            settings=settings, progress=args.progress, argv=args.argv)
+                            settings=settings, progress=args.progress, argv=args.argv, cache=not args.no_cache)
     return summary, None if args.json else print_summary(summary), 0

@@ -10,7 +10,7 @@ calibrated:DIR/calibrated.toml``) and ``calibration.json``.
 import sys
 from pathlib import Path
 
-from harness.cli.options import add_out
+from harness.cli.options import add_no_cache, add_out
 from harness.errors import InputError
 
 HELP = "fit the per-cell calibration form (scales as functions of each cell's material) to calibrate's oracle"
@@ -31,6 +31,7 @@ def configure(sp):
                     help="both: sigma_scale and radiance_scale from the material (Eq. F5, on the oracle); radiance: "
                          "sigma_scale the scalar fit's, radiance_scale from the material (Eq. F7); loss: both, fitted "
                          "on the render loss through the calibration's scan (Eq. F8) (default: both)")
+    add_no_cache(sp)
 
 
 def run(args):
@@ -42,7 +43,8 @@ def run(args):
                              f"{d} holds no calibration.json", "give a folder written by sslpv-harness calibrate")
     info = run_form(args.source, args.out, args.against or args.source, anchored=not args.free_level,
                     argv=[a for a in args.argv if a != "calibrate-form"], command="sslpv-harness calibrate-form",
-                    progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes)
+                    progress=lambda m: print(m, file=sys.stderr, flush=True), slopes=args.slopes,
+                    cache=not args.no_cache)
     lines = []
     for label, res in info["results"].items():
         t = res["targets"]

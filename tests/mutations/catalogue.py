@@ -552,6 +552,16 @@ MUTATIONS = (
              '"calibration": _calibration_sha(params),', '"calibration": None,',
              ("tests/test_result_cache.py::test_key_follows_every_part",),
              "result cache: a calibrated mapping keyed by its path only, not its content"),
+    Mutation("scan_cache_key_without_steps", "mapping", "harness/calibration/scan.py",
+             "params = self.base.replace(N=N, steps=steps, sigma_scale=s)", "params = self.base.replace(N=N, sigma_scale=s)",
+             ("tests/test_scan_cache.py::test_a_second_scan_is_served_bit_for_bit",),
+             "calibration scan through the result cache: the step count left out of the key, every count of a "
+             "grouped propagation served as one"),
+    Mutation("scan_cache_shares_sweep_keys", "mapping", "harness/calibration/scan.py",
+             '.as_dict() | {"use": "calibration scan"}', ".as_dict()",
+             ("tests/test_scan_cache.py::test_a_scan_entry_is_never_a_sweeps",),
+             "calibration scan through the result cache: a scan's entry (no timings, no diagnostics) keyed as the "
+             "sweep's configuration, so a sweep would be served it"),
     Mutation("fingerprint_keeps_docstrings", "metric", "harness/io/source.py",
              "node.body = body[1:] or [ast.Pass()]", "node.body = body",
              ("tests/test_result_cache.py::test_an_edit_rekeys_exactly_the_methods_that_use_it",),
