@@ -11,7 +11,8 @@ Reads ``DIR/calibration.json`` (written by :mod:`harness.calibration.form`) and 
 
 It computes nothing: every figure is the form's own (the scalar family's as the form's report copied them). ``--write`` puts the tables on the
 page ``docs/benchmarks/calibration_form_<family>.md`` (``..._radiance.md`` for a form fitted with
-``--slopes radiance``, Eq. F7, ``..._loss.md`` for ``--slopes loss``, Eq. F8; ``benchmarks/page.py``).
+``--slopes radiance``, Eq. F7, ``..._loss.md`` for ``--slopes loss``, Eq. F8, ``..._channels.md`` for ``--slopes
+channels``, Eq. F9; ``benchmarks/page.py``).
 
 Run: ``.venv/bin/python benchmarks/calibration_form.py DIR [--write]``
 """
@@ -45,7 +46,8 @@ def main(argv=None):
     page = Page(f"calibration_form_{form['family']}" + ("" if slopes == "both" else f"_{slopes}"),
                 f"The calibration of the {form['family']} family as a form of the material"
                 + {"both": "", "radiance": ": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)",
-                   "loss": ": both scales per cell, fitted on the render loss (Eq. F8)"}[slopes])
+                   "loss": ": both scales per cell, fitted on the render loss (Eq. F8)",
+                   "channels": ": both scales per cell, fitted on the render loss channel by channel (Eq. F9)"}[slopes])
     with page.capture(markdown=True):
         _tables(form)
     page.finish(args.write)
@@ -91,7 +93,8 @@ def _tables(form):
               f"penalty): ln s spread {p['ln_s']['sd']:.3g}, error {p['ln_s']['loo_rmse']:.3g}; ln r spread "
               f"{p['ln_r']['sd']:.3g}, error {p['ln_r']['loo_rmse']:.3g}")
         if "loss" in p:
-            print(f"how much the terms help in the loss itself (Eq. F8, mean leave-one-out ln relMSE at that penalty): "
+            print(f"how much the terms help in the loss itself (Eq. {'F9' if form.get('slopes') == 'channels' else 'F8'}, mean "
+                  f"leave-one-out ln relMSE at that penalty): "
                   f"form {p['loss']['form']:.3g}, scalar calibration {p['loss']['scalar']:.3g}")
         if "ln_r_at_s" in p:
             print(f"how well the terms predict each scene's best ln r at the scalar sigma_scale (Eq. F7, the targets of "

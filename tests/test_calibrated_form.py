@@ -402,7 +402,7 @@ class TestSources:
         return d
 
     def test_grids_together(self, tmp_path):
-        from harness.calibration.form import _sources
+        from harness.calibration.form_files import read_sources as _sources
 
         cal, settings = _sources([self.folder(tmp_path, "a"), self.folder(tmp_path, "b", grid=16)])
         assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS
@@ -411,7 +411,7 @@ class TestSources:
     @pytest.mark.parametrize("other, field", [({"grid": 32}, "budgets"), ({"family": "diffusion", "grid": 16}, "family"),
                                               ({"skip": 0, "grid": 16}, "settings")])
     def test_refused(self, tmp_path, other, field):
-        from harness.calibration.form import _sources
+        from harness.calibration.form_files import read_sources as _sources
 
         b = self.folder(tmp_path, "b", **other)
         with pytest.raises(InputError) as exc:
@@ -435,4 +435,8 @@ def test_study_names_a_form_apart_from_its_scalar_family(tmp_path):
     loss = tmp_path / "l.toml"
     loss.write_text(form_toml("collision", SETTINGS, [(32, 8, TERMS, SIGMA, RADIANCE)], {"loss": "t", "slopes": "loss"}))
     assert study_label(f"calibrated:{loss}") == "calibrated collision loss form"
+    channels = tmp_path / "c.toml"
+    channels.write_text(form_toml("collision", SETTINGS, [(32, 8, TERMS, SIGMA, RADIANCE)],
+                                  {"loss": "t", "slopes": "channels"}))
+    assert study_label(f"calibrated:{channels}") == "calibrated collision channel form"
     assert study_label("collision") == "collision"

@@ -33,8 +33,10 @@ its fold.
 With ``slopes = "loss"`` (``--slopes loss``) both scales' coefficients are fitted on the render loss (C2) itself,
 through each scene's images at the calibration's scan of ``sigma_scale`` and their spline (Eq. F8,
 :mod:`harness.calibration.form_loss`): no oracle and no anchor, so the scenes' valleys in ``(ln s, ln r)``
-trade off as the loss says. It renders every scene at every scanned ``sigma_scale`` once more (the scan
-of ``sslpv-harness calibrate``, whose images a calibration does not keep).
+trade off as the loss says. It needs every scene at every scanned ``sigma_scale`` (the scan of ``sslpv-harness
+calibrate``), served from the result cache where that calibration ran on this machine, else rendered.
+``slopes = "channels"`` (``--slopes channels``) fits the same loss with each colour channel at its own terms
+(Eq. F9 of :mod:`harness.calibration.form_loss`); its report keeps those terms (``channel_terms``).
 
 ``ln_extent_per_step`` (F4) is a term of the integer budgets only: ``steps = steady`` has no
 step count and its form drops the term. Limits: the fit regresses the oracle's parameters, not
@@ -63,6 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.calibration.form_files import against_medians, form_toml, read_sources
 from harness.calibration.form_fit import fit_form, predictive_power
 from harness.calibration.run import ENERGY_TARGET, _figures, _reference
 from harness.calibration.scan import budget_label
@@ -75,8 +78,8 @@ __all__ = ["scene_terms", "budget_terms", "fold_fits", "fold_anchor", "radiance_
 #: Target: median held-out relMSE at most this times the best calibrated family's at the budget.
 FORM_RELMSE_FACTOR = 0.5
 #: Which scales depend on the material: both (F5, on the oracle), the radiance scale alone (F7), or both fitted on
-#: the render loss itself (F8).
-SLOPES = ("both", "radiance", "loss")
+#: the render loss itself, with each scene at its mean terms (F8) or each colour channel at its own (F9).
+SLOPES = ("both", "radiance", "loss", "channels")
 
 
 def budget_terms(steps):
@@ -86,9 +89,10 @@ def budget_terms(steps):
     return tuple(t for t in TERMS if isinstance(steps, int) or t != "ln_extent_per_step")
 
 
-def scene_terms(scene, N, steps, settings):
+def scene_terms(scene, N, steps, settings, per_channel=False):
     """The scene-level terms of (F1) at grid ``N`` and step count ``steps``: each term's mean over the
-    inside cells and colours of the medium as the renderer maps it (same resampling, phase scaling, eta)."""
+    inside cells and colours of the medium as the renderer maps it (same resampling, phase scaling, eta);
+    ``per_channel``: a list of three such lists, each the mean over the inside cells of one colour (Eq. F9)."""
     from harness.scene.geometry import grid_inside
     from sslpv_gl.material import delta_eddington, resample_medium
     from sslpv_gl.material_form import cell_numbers, extent_cells, mean_numbers
@@ -100,6 +104,12 @@ def scene_terms(scene, N, steps, settings):
         st, a, g = delta_eddington(st, a, g)
     dx = float(np.asarray(med.bbox_max, np.float64)[0] - np.asarray(med.bbox_min, np.float64)[0]) / N
     numbers = cell_numbers(st, a, g, dx, float(scene.boundary.eta), extent_cells(inside, N), steps)
+    if per_channel:
+        out = []
+        for c in range(np.shape(st)[-1]):
+            m = mean_numbers({name: x[..., c] for name, x in numbers.items()}, inside)
+            out.append([m[name] for name in budget_terms(steps)])
+        return out
     means = mean_numbers(numbers, inside)
     return {t: means[t] for t in budget_terms(steps)}
 
@@ -165,32 +175,6 @@ def fold_fits_loss(names, X, tables, u_grid, held):
     return {"sigma": sigma, "radiance": radiance, "lam": lam, "scenes": train}
 
 
-def form_toml(family, settings, budgets, fit_info):
-    """A version 3 calibrated mapping file: ``budgets`` is ``[(N, steps, terms, sigma, radiance), ...]``
-    (coefficients ``[const, *terms]``), written against the file's one ``[form]`` term list."""
-    from sslpv_gl.calibrated import FORM_VERSION, FORMAT
-    from sslpv_gl.material_form import TERMS
-
-    def val(v):
-        return json.dumps(v) if isinstance(v, (str, bool, list)) else repr(v)
-
-    lines = ["# Written by python -m harness.calibration.form; use it as --mapping calibrated:PATH.",
-             f'format = "{FORMAT}"', f"version = {FORM_VERSION}", f'family = "{family}"', "",
-             "[settings]   # the renderer settings of the fit: a render must use the same"]
-    lines += [f"{k} = {val(v)}" for k, v in settings.items()]
-    lines += ["", "[fit]"] + [f"{k} = {val(v)}" for k, v in fit_info.items()]
-    lines += ["", "[form]   # ln s = a0 + sum_k a_k x_k, the same for ln r (sslpv_gl.material_form, Eq. F1)",
-              f"terms = {val(list(TERMS))}"]
-    for N, steps, terms, sigma, radiance in budgets:
-        full = {}
-        for name, coeffs in (("sigma_form", sigma), ("radiance_form", radiance)):
-            by_term = dict(zip(terms, coeffs[1:]))
-            full[name] = [float(coeffs[0])] + [float(by_term.get(t, 0.0)) for t in TERMS]
-        lines += ["", "[[budget]]", f"N = {N}", f"steps = {val(steps)}",
-                  f"sigma_form = {val(full['sigma_form'])}", f"radiance_form = {val(full['radiance_form'])}"]
-    return "\n".join(lines) + "\n"
-
-
 def _render(renderer, scene, path, settings, N, steps_list):
     """``{steps: subsurface image}`` of ``scene`` with the calibrated file ``path`` (integer counts from one
     grouped call, as the renderer groups them; ``steady`` alone). A failed render is left out."""
@@ -222,46 +206,6 @@ def _median(values):
     return statistics.median(vals) if vals else None
 
 
-def _against(dirs):
-    """``{family: {budget label: median held-out relMSE}}`` of the calibrations in ``dirs``."""
-    out = {}
-    for d in dirs:
-        cal = json.loads((Path(d) / "calibration.json").read_text())
-        out.setdefault(cal["family"], {}).update(
-            {label: res["targets"]["median_held_out_relmse"] for label, res in cal["results"].items()})
-    return out
-
-
-def _sources(paths):
-    """The calibrations in ``paths`` as one: their budgets together (one family, one set of settings and scenes;
-    a budget in two of them is refused) -> ``(cal, settings)``, ``cal["results"]`` holding every budget."""
-    from sslpv_gl.calibrated import load_calibrated
-    from sslpv_gl.material import MAPPINGS
-
-    merged, settings = None, None
-    for source in map(Path, paths):
-        cal_path = source / "calibration.json"
-        if not cal_path.is_file():
-            raise InputError(cal_path, "file", "does not exist", "give the --out folder of sslpv-harness calibrate")
-        cal = json.loads(cal_path.read_text())
-        these = dict(load_calibrated(source / "calibrated.toml", tuple(MAPPINGS)).settings)
-        if merged is None:
-            merged, settings = dict(cal, budgets=[], results={}), these
-        for key, have, want in (("family", cal["family"], merged["family"]), ("settings", these, settings),
-                                ("scenes", cal["scenes"], merged["scenes"])):
-            if have != want:
-                raise InputError(cal_path, key, f"differs from the first --from calibration's ({have!r} against "
-                                 f"{want!r})", "give calibrations of one family, settings and scenes")
-        for N, k in cal["budgets"]:
-            label = budget_label(int(N), k)
-            if label in merged["results"]:
-                raise InputError(cal_path, "budgets", f"{label} is also in another --from calibration",
-                                 "give each budget once")
-            merged["budgets"].append([int(N), k])
-            merged["results"][label] = cal["results"][label] | {"source": str(source)}
-    return merged, settings
-
-
 def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, progress=print,
              command="python -m harness.calibration.form", slopes="both", cache=True):
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
@@ -277,7 +221,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     sources = [str(p) for p in ([source] if isinstance(source, (str, Path)) else source)]
     out = Path(out)
     _check_replaceable(out)
-    cal, settings = _sources(sources)
+    cal, settings = read_sources(sources)
     cal_path = Path(sources[0]) / "calibration.json"
     names = list(cal["scenes"])
     budgets = [(int(N), k) for N, k in cal["budgets"]]
@@ -311,8 +255,8 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
         return None if img is None else relmse_coefficients(img[m].ravel(),
                                                             np.asarray(refs[n]["subsurface"], np.float64)[m].ravel())
 
-    if slopes == "loss":                                                            # (F8): the calibration's scan
-        from harness.calibration.form_loss import loss_power, scan_grid, scene_table
+    if slopes in ("loss", "channels"):                                              # (F8), (F9): the calibration's scan
+        from harness.calibration.form_loss import loss_power, scan_grid, scene_table, scene_table_channels
 
         u_grid = scan_grid(cal["sigma_scan"])
         for n in names:
@@ -343,23 +287,29 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 progress(f"{label}: radiance targets of the fold without {held or 'no scene'}")
             power["ln_r_at_s"] = predictive_power([X[n] for n in targets], list(targets.values()), folds[None]["lam"],
                                                    testable=True)
-        elif slopes == "loss":                                                      # (F8)
-            tables = {n: scene_table(scanner.samples[((N, k), n)], u_grid) for n in names
+        elif slopes in ("loss", "channels"):                                        # (F8), (F9)
+            table = scene_table if slopes == "loss" else scene_table_channels
+            tables = {n: table(scanner.samples[((N, k), n)], u_grid) for n in names
                       if len(scanner.samples[((N, k), n)].u) >= 3}
+            Xf = X if slopes == "loss" else {n: scene_terms(scenes[n], N, k, settings, per_channel=True) for n in names}
             folds = {}
             for held in [None, *names]:
-                folds[held] = fold_fits_loss(names, X, tables, u_grid, held)
+                folds[held] = fold_fits_loss(names, Xf, tables, u_grid, held)
                 progress(f"{label}: the loss form fitted without {held or 'no scene'}")
-            power["loss"] = loss_power([X[n] for n in tables], u_grid, list(tables.values()), folds[None]["lam"])
+            power["loss"] = loss_power([Xf[n] for n in tables], u_grid, list(tables.values()), folds[None]["lam"])
         else:
             folds = {held: fold_fits(names, X, ln_s, ln_r, held, fold_anchor(res, held) if anchored else None)
                      for held in [None, *names]}
         fits[label] = {"terms": terms, "X": X, "power": power, "folds": folds}
+        if slopes == "channels":
+            fits[label]["X_channels"] = Xf
 
-    if slopes == "loss":
+    if slopes in ("loss", "channels"):
         anchored = False
         loss = ("both scales' coefficients fitted on the render loss (Eq. C2) through the scan's interpolated images "
-                "(Eq. F8 of harness.calibration.form_loss), ridge penalty by leave-one-out")
+                + ("(Eq. F8 of harness.calibration.form_loss)" if slopes == "loss" else
+                   "with each colour channel at its own terms (Eq. F9 of harness.calibration.form_loss)")
+                + ", ridge penalty by leave-one-out")
     elif slopes == "radiance":
         anchored = True
         loss = ("sigma_scale: the source's scalar fit; ln r: ridge regression (Eq. F5 of harness.calibration.form_fit)"
@@ -398,7 +348,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
                 progress(f"rendered {n} with the form fitted on {'all scenes' if held is None else 'the others'}")
 
     # 4. figures and targets
-    best = _against(against)
+    best = against_medians(against)
     results = {}
     for N, k in budgets:
         label = budget_label(N, k)
@@ -409,6 +359,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
             "coefficients": {key: f["folds"][None][key] for key in ("sigma", "radiance", "lam")},
             "folds": {n: {key: f["folds"][n][key] for key in ("sigma", "radiance", "lam")} for n in names},
             "scene_terms": f["X"], "predictive_power": f["power"],
+            **({"channel_terms": f["X_channels"]} if "X_channels" in f else {}),
             "in_sample": {n: figs["in_sample"].get(label, {}).get(n, {"relmse": None, "energy_ratio": None})
                           for n in names},
             "held_out": held,

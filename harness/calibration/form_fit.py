@@ -47,11 +47,12 @@ MIN_SPREAD = 1e-9
 def loo_testable_terms(X):
     """The terms (k,) bool that leave-one-out can test: their spread over the scenes ``X`` (n, k) stays above
     :data:`MIN_SPREAD` with any one scene left out (at least three distinct values, or two values each taken
-    by two scenes or more)."""
+    by two scenes or more). ``X`` (n, m, k): ``m`` rows per scene (its colour channels), left out together."""
     X = np.asarray(X, dtype=np.float64)
-    use = X.std(axis=0) > MIN_SPREAD
+    k = X.shape[-1]
+    use = X.reshape(-1, k).std(axis=0) > MIN_SPREAD
     for i in range(X.shape[0]):
-        use &= np.delete(X, i, axis=0).std(axis=0) > MIN_SPREAD
+        use &= np.delete(X, i, axis=0).reshape(-1, k).std(axis=0) > MIN_SPREAD
     return use
 
 

@@ -27,10 +27,11 @@ def configure(sp):
                          "(default: [], the --from folders)")
     sp.add_argument("--free-level", action="store_true",
                     help="fit the form's own level terms instead of anchoring them to the scalar pair (Eq. F6)")
-    sp.add_argument("--slopes", choices=("both", "radiance", "loss"), default="both",
+    sp.add_argument("--slopes", choices=("both", "radiance", "loss", "channels"), default="both",
                     help="both: sigma_scale and radiance_scale from the material (Eq. F5, on the oracle); radiance: "
                          "sigma_scale the scalar fit's, radiance_scale from the material (Eq. F7); loss: both, fitted "
-                         "on the render loss through the calibration's scan (Eq. F8) (default: both)")
+                         "on the render loss through the calibration's scan (Eq. F8); channels: as loss, each colour "
+                         "channel at its own terms (Eq. F9) (default: both)")
     add_no_cache(sp)
 
 

@@ -87,8 +87,8 @@ def study_label(mapping):
         forms = [b.form for b in cal.budgets if b.form is not None]
         if not forms:
             return f"calibrated {cal.family}"
-        if cal.fit.get("slopes") == "loss":
-            return f"calibrated {cal.family} loss form"
+        if cal.fit.get("slopes") in ("loss", "channels"):
+            return f"calibrated {cal.family} {'loss' if cal.fit['slopes'] == 'loss' else 'channel'} form"
         return f"calibrated {cal.family}" + (" radiance" if not any(any(f.sigma) for f in forms) else "") + " form"
     except InputError:
         return "calibrated " + Path(m.split(":", 1)[1]).parent.name
