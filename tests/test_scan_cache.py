@@ -12,9 +12,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from harness.calibration.scan import Scanner, scan_cache
+from harness.calibration.scan import Scanner
 from harness.cli import main
-from harness.runs.cache import ResultCache, result_key
+from harness.runs.cache import ResultCache, open_cache, result_key
 from sslpv_gl.params import SSLPVParams
 
 H, W = 4, 5
@@ -113,7 +113,7 @@ def test_without_a_cache_everything_is_rendered(tmp_path):
     _scan(r, None)
     _scan(r, None)
     assert r.calls == 2 * 2 * 2 * 2
-    assert scan_cache(False) is None and scan_cache(None) is None
+    assert open_cache(False, "calibrate") is None and open_cache(None, "calibrate") is None
 
 
 def test_a_bad_entry_is_rendered_again_with_one_line(tmp_path):

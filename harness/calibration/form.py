@@ -211,7 +211,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     """Fit, validate and write the form for the calibrations in ``source`` (a folder, or a list of folders of one
     family whose budgets are taken together; module docstring) -> the report dict. ``slopes``: ``"both"`` (F5),
     ``"radiance"`` (F7, always anchored) or ``"loss"`` (F8: the levels from the loss, never anchored). ``cache``: the
-    scan's renders through the result cache (:func:`harness.calibration.scan.scan_cache`), False to render them all."""
+    scan's renders through the result cache (:func:`harness.runs.cache.open_cache`'s argument), False to render them all."""
     from harness.io.atomic import _check_replaceable, atomic_dir
     from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
@@ -242,10 +242,11 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     # (F7)'s renders: the family's mapping at a fold's sigma_scale, memoised (failed renders left out) by the scan's
     # own renderer of a calibration
     from harness.calibration.fit import relmse_coefficients
-    from harness.calibration.scan import Scanner, scan_cache
+    from harness.calibration.scan import Scanner
+    from harness.runs.cache import open_cache
     from sslpv_gl.params import SSLPVParams
 
-    results_cache = scan_cache(cache)
+    results_cache = open_cache(cache, "calibrate-form")
     scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets,
                       cache=results_cache)
 
@@ -269,7 +270,7 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     for N, k in budgets:
         label, res = budget_label(N, k), cal["results"][budget_label(N, k)]
         terms = budget_terms(k)
-        X = {n: [scene_terms(scenes[n], N, k, settings)[t] for t in terms] for n in names}
+        X = {n: list(scene_terms(scenes[n], N, k, settings).values()) for n in names}      # in the order of terms
         ln_s = {n: math.log(res["oracle"][n]["s"]) for n in names}
         ln_r = {n: math.log(res["oracle"][n]["r"]) for n in names}
         lam = fold_fits(names, X, ln_s, ln_r, None)["lam"]

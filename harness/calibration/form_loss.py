@@ -116,10 +116,10 @@ def _losses(u_grid, T, u, v):
         dq_dv = (2.0 * val[:, 0] * r * r - 2.0 * val[:, 1] * r).reshape(n, m) / m
     finite = np.isfinite(q)
     ok = finite & (q > Q_FLOOR)
-    qs = np.where(ok, q, 1.0)[:, None]
+    qs = np.where(ok, q, 1.0)
     # relMSE grows as r^2 beyond the float range: there the loss is the largest, never the floor's
-    L = np.where(ok, np.log(np.where(ok, q, 1.0)), np.where(finite, np.log(Q_FLOOR), L_OVERFLOW))
-    return L, np.where(ok[:, None], dq_du / qs, 0.0), np.where(ok[:, None], dq_dv / qs, 0.0)
+    L = np.where(ok, np.log(qs), np.where(finite, np.log(Q_FLOOR), L_OVERFLOW))
+    return L, np.where(ok[:, None], dq_du / qs[:, None], 0.0), np.where(ok[:, None], dq_dv / qs[:, None], 0.0)
 
 
 def _rows(X, tabs):

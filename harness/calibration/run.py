@@ -39,7 +39,7 @@ import numpy as np
 
 from harness.calibration.families import COMPARED, family as get_family
 from harness.calibration.fit import best_scale, fit, fit_refined, halves_se
-from harness.calibration.scan import Scanner, budget_label, scan_cache
+from harness.calibration.scan import Scanner, budget_label
 from harness.errors import InputError
 
 __all__ = ["run_calibrate", "parse_budgets", "ENERGY_TARGET", "RELMSE_TARGET_FACTOR"]
@@ -213,7 +213,9 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
     planned = len(names) * (len(s_values) * n_groups + 3 * len(budgets)) + len(COMPARED) * len(names) * n_groups
     phases = {}
     with Progress(f"calibrate {fam.name}", total=planned, unit="renders", enabled=progress) as prog:
-        results_cache = scan_cache(cache)
+        from harness.runs.cache import open_cache
+
+        results_cache = open_cache(cache, "calibrate")
         scanner = Scanner(renderer, scene_objs, refs, base, budgets, prog, label=f"{fam.name} family",
                           cache=results_cache)
 

@@ -8,8 +8,8 @@ rendering each count alone), and ``steps = "steady"`` is its own solve. Each res
 into the :class:`~harness.calibration.fit.SceneSamples` of its (budget, scene), and the
 subsurface image itself is kept for the figures that are computed from full images.
 
-With a result cache (:class:`harness.runs.cache.ResultCache`; ``cache/results/`` unless
-``$SSLPV_RESULT_CACHE``), each ``(scene, N, steps, sigma_scale)`` image is looked up before it is
+With a result cache (:class:`harness.runs.cache.ResultCache`, as
+:func:`harness.runs.cache.open_cache` opens it; ``cache/results/`` unless ``$SSLPV_RESULT_CACHE``), each ``(scene, N, steps, sigma_scale)`` image is looked up before it is
 rendered and stored after, so a calibration run again, or a form fitted from a calibration's scan
 (:mod:`harness.calibration.form`), renders only what no earlier run rendered. Its key is the
 result cache's (:func:`harness.runs.cache.result_key`: the method's code, the scene's content hash,
@@ -25,30 +25,17 @@ again, with one line saying why).
 
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np
 
 from harness.calibration.fit import SceneSamples
 
-__all__ = ["Scanner", "budget_label", "scan_cache"]
+__all__ = ["Scanner", "budget_label"]
 
 
 def budget_label(N, steps):
     return f"N={N} steps={steps}"
-
-
-def scan_cache(cache):
-    """The result cache of a scan: ``True`` the default folder (an entry it does not serve says why in one
-    line on stderr), a :class:`~harness.runs.cache.ResultCache` itself, ``False`` or ``None`` none."""
-    from harness.runs.cache import ResultCache
-
-    if cache is False or cache is None:
-        return None
-    if isinstance(cache, ResultCache):
-        return cache
-    return ResultCache(log=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 class Scanner:

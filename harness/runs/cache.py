@@ -281,11 +281,12 @@ def workers_gl_renderer(client):
     return client.submit(local_gl_renderer, pure=False, key="sslpv-gl-renderer").result()
 
 
-def open_cache(cache):
-    """``run_sweep``'s ``cache`` argument -> a :class:`ResultCache` or None.
+def open_cache(cache, what="sweep"):
+    """``run_sweep``'s (or a calibration's) ``cache`` argument -> a :class:`ResultCache` or None.
 
     True: the default folder; a :class:`ResultCache`: itself; False or None: no cache. An entry
-    that is not served says why on stderr even under ``--no-progress``: a warning, not progress.
+    that is not served says why on stderr even under ``--no-progress``: a warning, not progress,
+    on a line that names ``what`` uses the cache.
     """
     from harness.progress import Progress
 
@@ -293,7 +294,7 @@ def open_cache(cache):
         return None
     if isinstance(cache, ResultCache):
         return cache
-    return ResultCache(log=Progress("sweep", None, enabled=True).log)
+    return ResultCache(log=Progress(what, None, enabled=True).log)
 
 
 class SweepCache:
