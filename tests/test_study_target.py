@@ -155,3 +155,43 @@ def test_a_budget_the_calibration_lacks_is_not_met(tmp_path):
     b = next(b for b in t["budgets"] if b["budget"] == "N=32 steps=steady")
     assert b["met"] is False and "no budget" in b["why"]
     assert t["met"] is False
+
+
+def _floor(folder, values, uniform=True, steps=(32, "steady")):
+    folder.mkdir(exist_ok=True)
+    rows = {s: {"relmse": v, "scalar": {"relmse": 1.5 * v}, "uniform": uniform if isinstance(uniform, bool)
+                else s in uniform} for s, v in values.items()}
+    (folder / "floor.json").write_text(json.dumps({"budgets": {f"N=32 steps={k}": {"N": 32, "steps": k, "scenes": rows}
+                                                               for k in steps}}))
+
+
+@pytest.mark.parametrize("floor, reach", [(0.02, "reachable"), (0.06, "**out of reach**")])
+def test_the_familys_floor_says_whether_the_limit_is_reachable(tmp_path, floor, reach):
+    """The floor of the winner's source (floor.json beside it, found through the form's ``sources``) is a row of
+    the table; its least median over the fitted scenes decides whether the relMSE limit (0.05 here) is reachable."""
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.08) for s in FITTED})
+    report = json.loads((tmp_path / "form" / "calibration.json").read_text())
+    report["sources"] = [str(tmp_path / "scalar")]
+    (tmp_path / "form" / "calibration.json").write_text(json.dumps(report))
+    _floor(tmp_path / "scalar", {s: floor for s in FITTED})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    _, b = _groups(t, "steady")
+    fl = b["relmse"]["floor"]
+    assert fl["median"] == pytest.approx(floor) and fl["bound"] == pytest.approx(floor) and fl["varying"] == []
+    assert fl["median_scalar"] == pytest.approx(1.5 * floor)
+    _, rows, verdict = target_table(t)
+    got = [r for r in rows if r[1].startswith("floor of the family")]
+    assert len(got) == 2 and all(r[4] == reach for r in got)
+    assert ("out of reach for the best's family at N=32 steps=32, N=32 steps=steady" in verdict) == (floor > 0.05)
+
+
+def test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero(tmp_path):
+    """Three of five fitted scenes vary on the grid: a form may beat their floor, so the least median is the
+    median of (0, 0, 0, floor, floor): reachable although every floor is above the limit."""
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.08) for s in FITTED})
+    _floor(tmp_path / "form", {s: 0.3 for s in FITTED}, uniform=set(FITTED[:2]))
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    _, b = _groups(t, 32)
+    fl = b["relmse"]["floor"]
+    assert fl["median"] == pytest.approx(0.3) and fl["bound"] == 0.0 and fl["varying"] == FITTED[2:]
+    assert target_table(t)[1][-1][4] == "reachable"

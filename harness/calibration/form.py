@@ -67,7 +67,7 @@ import numpy as np
 
 from harness.calibration.form_files import against_medians, form_toml, read_sources
 from harness.calibration.form_fit import fit_form, predictive_power
-from harness.calibration.run import ENERGY_TARGET, _figures, _reference
+from harness.calibration.run import ENERGY_TARGET, _figures
 from harness.calibration.scan import budget_label
 from harness.errors import InputError
 
@@ -213,7 +213,6 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     ``"radiance"`` (F7, always anchored) or ``"loss"`` (F8: the levels from the loss, never anchored). ``cache``: the
     scan's renders through the result cache (:func:`harness.runs.cache.open_cache`'s argument), False to render them all."""
     from harness.io.atomic import _check_replaceable, atomic_dir
-    from harness.runs.references import load_reference
     from sslpv_gl.calibrated import load_calibrated
     from sslpv_gl.material import MAPPINGS
 
@@ -222,33 +221,18 @@ def run_form(source, out, against=(), anchored=True, renderer=None, argv=None, p
     out = Path(out)
     _check_replaceable(out)
     cal, settings = read_sources(sources)
-    cal_path = Path(sources[0]) / "calibration.json"
     names = list(cal["scenes"])
     budgets = [(int(N), k) for N, k in cal["budgets"]]
-    scenes, refs = {}, {}
-    for n in names:
-        scene, folder = _reference(n, tuple(cal["sizes"][n]))
-        if scene.content_hash != cal["content_hashes"][n]:
-            raise InputError(cal_path, f"content_hashes.{n}", "the scene changed since this calibration: its "
-                             "oracle no longer holds", f"calibrate the {cal['family']} family again")
-        scenes[n], refs[n] = scene, load_reference(folder, (scene.camera.height, scene.camera.width))
-    if renderer is None:
-        from sslpv_gl.renderer import SSLPVRenderer
-
-        renderer = SSLPVRenderer()
-
     if slopes not in SLOPES:
         raise InputError("--slopes", "slopes", f"unknown {slopes!r}", f"use one of: {', '.join(SLOPES)}")
     # (F7)'s renders: the family's mapping at a fold's sigma_scale, memoised (failed renders left out) by the scan's
     # own renderer of a calibration
     from harness.calibration.fit import relmse_coefficients
-    from harness.calibration.scan import Scanner
-    from harness.runs.cache import open_cache
-    from sslpv_gl.params import SSLPVParams
+    from harness.calibration.scan import calibration_scanner
 
-    results_cache = open_cache(cache, "calibrate-form")
-    scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets,
-                      cache=results_cache)
+    scanner, scenes, results_cache = calibration_scanner(cal, settings, Path(sources[0]) / "calibration.json",
+                                                         renderer, cache, "calibrate-form")
+    renderer, refs = scanner.renderer, scanner.refs
 
     def at(n, N, k, s):
         scanner.render(n, s, [(N, k)])

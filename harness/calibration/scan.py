@@ -31,11 +31,39 @@ import numpy as np
 
 from harness.calibration.fit import SceneSamples
 
-__all__ = ["Scanner", "budget_label"]
+__all__ = ["Scanner", "budget_label", "calibration_scanner"]
 
 
 def budget_label(N, steps):
     return f"N={N} steps={steps}"
+
+
+def calibration_scanner(cal, settings, cal_path, renderer=None, cache=True, what="calibrate-form"):
+    """The :class:`Scanner` of a calibration read back (``cal``, ``settings``: :func:`~harness.calibration.form_files.
+    read_sources`), with its scenes and committed references -> ``(scanner, scenes, results cache or None)``.
+    A scene whose content changed since the calibration is refused in one line (its oracle no longer holds)."""
+    from harness.calibration.run import _reference
+    from harness.errors import InputError
+    from harness.runs.cache import open_cache
+    from harness.runs.references import load_reference
+    from sslpv_gl.params import SSLPVParams
+
+    scenes, refs = {}, {}
+    for n in cal["scenes"]:
+        scene, folder = _reference(n, tuple(cal["sizes"][n]))
+        if scene.content_hash != cal["content_hashes"][n]:
+            raise InputError(cal_path, f"content_hashes.{n}", "the scene changed since this calibration: its "
+                             "oracle no longer holds", f"calibrate the {cal['family']} family again")
+        scenes[n], refs[n] = scene, load_reference(folder, (scene.camera.height, scene.camera.width))
+    if renderer is None:
+        from sslpv_gl.renderer import SSLPVRenderer
+
+        renderer = SSLPVRenderer()
+    results_cache = open_cache(cache, what)
+    budgets = [(int(N), k) for N, k in cal["budgets"]]
+    scanner = Scanner(renderer, scenes, refs, SSLPVParams(mapping=cal["mapping"], **settings), budgets,
+                      cache=results_cache)
+    return scanner, scenes, results_cache
 
 
 class Scanner:

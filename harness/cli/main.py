@@ -15,7 +15,7 @@ import json
 import re
 import sys
 
-from harness.cli import (baselines, calibrate, calibrate_best, calibrate_form, compare, export, nightly, reference, render, report,
+from harness.cli import (baselines, calibrate, calibrate_best, calibrate_floor, calibrate_form, compare, export, nightly, reference, render, report,
                          scenes, study, sweep)
 from harness.cli.options import add_json
 from harness.errors import EnvironmentProblem, InputError, ResultRefused
@@ -24,7 +24,8 @@ from harness.errors import EnvironmentProblem, InputError, ResultRefused
 COMMANDS = [
     ("scenes", scenes), ("reference", reference), ("render", render), ("compare", compare),
     ("sweep", sweep), ("report", report), ("export", export), ("nightly", nightly), ("baselines", baselines),
-    ("calibrate", calibrate), ("calibrate-form", calibrate_form), ("calibrate-best", calibrate_best),
+    ("calibrate", calibrate), ("calibrate-form", calibrate_form), ("calibrate-floor", calibrate_floor),
+    ("calibrate-best", calibrate_best),
     ("study", study),
 ]
 

@@ -22,7 +22,11 @@ headline, the extension families left out, and budget, by the study's first metr
   family the study rendered (the extension that matches the two). Computed from the scene's medium (no render).
 * **mapping** (calibrated, in-sample against held out): for each calibration of the study whose
   ``calibration.json`` lies beside it, the fit's own in-sample and leave-one-scene-out relMSE at the
-  subject's budget, as ``sslpv-harness calibrate`` measured them (not re-rendered by the study).
+  subject's budget, as ``sslpv-harness calibrate`` measured them (not re-rendered by the study); and
+  each calibrated family's floor where one was written (``floor.json``, :mod:`harness.calibration.floor`):
+  the scene at its own best scales per colour channel, what no calibration of the family beats where the
+  scene's terms are uniform. Held out far above the floor: the form's generalisation limits the scene;
+  near it: the lattice itself.
 
 Limits: one subject per scene; a decomposition is reported as "not measured" with the reason when
 its data is missing; the steps decomposition compares the same N only.
@@ -171,7 +175,28 @@ def _mapping(subject, calibrations, budget):
                          "in_sample_energy": ins.get("energy_ratio"), "held_out_energy": held.get("energy_ratio")})
     if not fits:
         return {"measured": False, "why": "no calibration of the study was fitted on this scene"}
-    return {"measured": True, "fits": fits}
+    return {"measured": True, "fits": fits, "floors": _floors(scene, calibrations, key or
+                                                              f"N={budget['grid']} steps={budget['steps'][0]}")}
+
+
+def _floors(scene, calibrations, key):
+    """The scene's floor (Eq. L1 of :mod:`harness.calibration.floor`) in each calibrated family of the study that
+    has one at ``key``, once per floor file."""
+    from harness.calibration.floor import floor_for
+
+    out, seen = [], set()
+    for cal in calibrations:
+        if not cal.get("report"):
+            continue
+        entry, path = floor_for(cal["report"], key)
+        row = (entry or {}).get("scenes", {}).get(scene)
+        if row is None or Path(path).resolve() in seen:
+            continue
+        seen.add(Path(path).resolve())
+        out.append({"family": Path(path).parent.name, "budget": f"N={entry['N']} K={entry['steps']}",
+                    "relmse": row["relmse"], "scalar": row["scalar"]["relmse"], "uniform": bool(row.get("uniform")),
+                    "energy_ratio": row.get("energy_ratio")})
+    return out
 
 
 def limits(rows, scenes, metric, twins, calibrations, budget, images=None):

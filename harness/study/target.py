@@ -15,6 +15,12 @@ if the study rendered it, :func:`target` checks at the study's grid N and at eac
          the lowest such median among the selection's scalar calibrations (one (s, r) pair per
          budget; the candidates' ``form`` false) at the same budget
 
+Beside (T4), the **floor** of the calibration's family where one was written (``floor.json`` of the calibration
+or of its sources; :mod:`harness.calibration.floor`): the median over the fitted scenes of each scene at its own
+best ``(s, r)`` per colour channel (Eq. L1), and ``bound``, the same median with every scene whose terms vary over
+the grid taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
+``bound``; where ``bound`` exceeds (T4)'s limit, (T4) is out of reach for the family.
+
 A scene of (T2) or (T3) that the calibration was fitted on is taken from its held-out validation like
 (T1); one it was not fitted on is the study's own render with the committed file, held out by
 construction (no fit saw it). A scene with neither is ``missing`` and its group is not met.
@@ -95,6 +101,25 @@ def _baseline(sel, key):
     return best
 
 
+def _floor(report, key, fitted):
+    """The family's floor at ``key`` over the ``fitted`` scenes (module docstring), or None where none was written."""
+    from harness.calibration.floor import floor_for, median_bound
+
+    entry, path = floor_for(report, key)
+    if entry is None:
+        return None
+    rows = entry.get("scenes") or {}
+    names = [n for n in fitted if n in rows]
+    if not names:
+        return None
+    where = Path(path).resolve()
+    return {"file": str(where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where),
+            "median": statistics.median(rows[n]["relmse"] for n in names),
+            "median_scalar": statistics.median(rows[n]["scalar"]["relmse"] for n in names),
+            "bound": median_bound(entry, names), "varying": [n for n in names if not rows[n].get("uniform")],
+            "scenes": len(names), "of": len(fitted)}
+
+
 def scene_info(names):
     """``{scene: {"dielectric", "tags"}}`` of the named scenes (suite names or folders), as :func:`target` takes it."""
     from harness.scene import load_scene
@@ -150,6 +175,7 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
         relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
                   "limit": RELMSE_FACTOR * base[1] if base else None}
         relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
+        relmse["floor"] = _floor(cal["report"], key, fitted)
         out["budgets"].append({"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
                                "met": all(g["met"] for g in groups) and relmse["met"]})
     out["met"] = all(b["met"] for b in out["budgets"])

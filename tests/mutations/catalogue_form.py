@@ -9,6 +9,8 @@ FT = "tests/test_calibrated_form.py"
 XT = "tests/test_study_extensions.py"
 BT = "tests/test_calibrate_best.py"
 CT = "tests/test_calibrated_form_channels.py"
+LT = "tests/test_calibration_floor.py"
+TT = "tests/test_study_target.py"
 
 FORM = (
     Mutation("form_radiance_target_weighted_power", "mapping", "harness/calibration/form.py",
@@ -146,4 +148,23 @@ FORM = (
              "win = sel[\"candidates\"][0]", "win = sel[\"candidates\"][-1]",
              (f"{BT}::test_the_command_writes_the_winner_and_reads_it_back",),
              "calibrate-best names the winner but writes the worst candidate's file"),
+    Mutation("floor_channels_worst", "mapping", "harness/calibration/floor.py",
+             'return {"relmse": float(np.mean([c["relmse"] for c in chans]))',
+             'return {"relmse": float(np.max([c["relmse"] for c in chans]))',
+             (f"{LT}::test_channel_floor_is_the_brute_force_minimum_through_the_metric",),
+             "a family's floor (Eq. L1): the worst channel's least relMSE instead of the channels' mean"),
+    Mutation("floor_radiance_not_fitted", "mapping", "harness/calibration/floor.py",
+             "    r = _best_r(A, B)\n    q = ", "    r = np.ones_like(A)\n    q = ",
+             (f"{LT}::test_channel_floor_is_the_brute_force_minimum_through_the_metric",
+              f"{LT}::test_scalar_floor_is_the_calibrations_oracle"),
+             "a family's floor searched over sigma_scale alone, at radiance_scale 1: not the least relMSE"),
+    Mutation("floor_bound_trusts_varying_scenes", "mapping", "harness/calibration/floor.py",
+             'rows[n]["relmse"] if rows[n].get("uniform") else 0.0', 'rows[n]["relmse"]',
+             (f"{LT}::test_median_bound_takes_varying_scenes_as_zero",
+              f"{TT}::test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero"),
+             "the least median of a family taken at the floor of scenes whose terms vary, where a form may beat it"),
+    Mutation("study_floor_judged_on_its_median", "mapping", "harness/study/present.py",
+             '"reachable" if fl["bound"] <= r["limit"]', '"reachable" if fl["median"] <= r["limit"]',
+             (f"{TT}::test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero",),
+             "the study calls the relMSE target out of reach on the floor's median, not the least median any form can reach"),
 )
