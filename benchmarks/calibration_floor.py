@@ -6,8 +6,8 @@ best calibration (``baselines/calibrated/best/selection.json``), and prints:
 
 * per family and budget: the median over the scenes of each scene at its own best scales per colour channel (L1),
   and with one pair per scene (L2, the calibration's oracle); the least median any calibration of the family can
-  reach (the scenes whose terms vary on the grid taken as 0); the scenes at the scan's end whose loss had not
-  levelled off there;
+  reach (:func:`harness.calibration.floor.median_bound`: the scenes whose terms vary on the grid, and those whose
+  least lies at the scan's end where the loss had not levelled off, taken as 0), with both kinds of scene named;
 * at the grid the selection ranks: the best calibration's held-out median beside its family's floor and the study's
   relMSE limit (:mod:`harness.study.target`: half the lowest held-out median among the selection's scalar
   calibrations), and which part of the gap is the lattice (the floor) and which the calibration (held out against
@@ -41,7 +41,9 @@ def _floors():
 
 
 def _least(b):
-    return statistics.median(r["relmse"] if r["uniform"] else 0.0 for r in b["scenes"].values())
+    from harness.calibration.floor import median_bound
+
+    return median_bound(b)
 
 
 def _family_table(floors):

@@ -112,6 +112,11 @@ def test_median_bound_takes_varying_scenes_as_zero():
     assert median_bound(entry) == pytest.approx(0.01)               # 0, 0, 0.01, 0.02, 0.03
     assert median_bound(entry, ["a", "b", "c"]) == pytest.approx(0.02)
     assert median_bound(entry, ["zz"]) is None
+    open_end = {"relmse": 0.015, "uniform": True, "channels": [{"settled": True}, {"settled": False}, {"settled": True}]}
+    entry["scenes"]["f"] = open_end                              # its least at the scan's end, not levelled off
+    assert median_bound(entry, ["a", "b", "c", "f"]) == pytest.approx(0.015)     # 0, 0.01, 0.02, 0.03
+    open_end["channels"][1]["settled"] = True
+    assert median_bound(entry, ["a", "b", "c", "f"]) == pytest.approx(0.0175)
 
 
 def test_terms_uniform_on_a_homogeneous_and_a_varying_medium():
@@ -220,12 +225,18 @@ def test_the_studys_limits_give_each_familys_floor_once(tmp_path):
     m = _mapping({"scene": "a", "K": "8", "N": 32}, cals, {"grid": 32, "steps": [8, "steady"]})
     assert [f["family"] for f in m["floors"]] == ["collision"]
     assert m["floors"][0]["relmse"] == pytest.approx(0.004) and m["floors"][0]["uniform"] is True
-    lines = limit_lines({"subject": "x", "relmse": 0.01, "floor": 0.001, "steps": {"measured": False, "why": "-"},
-                         "outside": {"measured": False, "why": "-"}, "boundary": {"measured": False, "why": "-"},
-                         "speed": {}, "mapping": m})
+    lines = limit_lines({**LIM, "mapping": m})
     floor_lines = [x for x in lines if x.startswith("Floor of the collision family")]
     assert len(floor_lines) == 1 and "0.004 with each colour channel" in floor_lines[0]
     assert "no calibration of the family does better" in floor_lines[0]
+    m["floors"][0].update(bounds=False)                          # uniform, but a channel's least at the scan's end
+    assert "beyond the scan" in [x for x in limit_lines({**LIM, "mapping": m}) if x.startswith("Floor")][0]
+    m["floors"][0].update(uniform=False)
+    assert "terms vary" in [x for x in limit_lines({**LIM, "mapping": m}) if x.startswith("Floor")][0]
+
+
+LIM = {"subject": "x", "relmse": 0.01, "floor": 0.001, "steps": {"measured": False, "why": "-"},
+       "outside": {"measured": False, "why": "-"}, "boundary": {"measured": False, "why": "-"}, "speed": {}}
 
 
 def _write_floor(folder, values, uniform):

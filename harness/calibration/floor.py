@@ -22,10 +22,14 @@ render at the optimum); :func:`scene_floor` recomputes it on a fine grid as a se
 **What it bounds.** A scalar calibration gives a scene one ``(s, r)``: its relMSE there is at least ``S_i``.
 A form (F1 of :mod:`sslpv_gl.material_form`) gives each cell and channel the scales of that cell's terms; on a
 scene whose terms take one value per channel over every cell of the grid (``uniform``: a homogeneous medium
-filling its box) that is one ``(s_c, r_c)`` per channel, so its relMSE is at least ``F_i``. The median over the
+filling its box) that is one ``(s_c, r_c)`` per channel, so its relMSE is at least ``F_i`` for scales within the
+scan, and for any scales where no channel's least lies at an end of the scan that the loss had not levelled off
+at (:func:`bounds`). The median over the
 scenes of any calibration is then at least the median of the floors (the median is monotone in each value),
 held out or in sample. Where the terms vary over the cells (a medium that varies, or one the resampling leaves
-uneven) a form can do better than ``F_i``, and the floor is only the scalar calibrations' bound.
+uneven) a form can do better than ``F_i``, and the floor is only the scalar calibrations' bound (within the scan).
+The least median any calibration of the family reaches (:func:`median_bound`) takes every scene whose floor does
+not bound it as 0.
 
 Limits:
 
@@ -58,7 +62,7 @@ from harness.calibration.scan import budget_label
 from harness.errors import InputError
 
 __all__ = ["U_POINTS", "FILE", "channel_floor", "scene_floor", "terms_uniform", "run_floor", "read_floor", "floor_for",
-           "median_bound"]
+           "bounds", "median_bound"]
 
 #: Values of ``ln s`` on which the floor is searched (four times the loss form's table).
 U_POINTS = 769
@@ -162,14 +166,21 @@ def floor_for(report, key):
     return None, None
 
 
+def bounds(row):
+    """True when a scene's floor bounds every calibration of the family: its terms are uniform on the grid and no
+    channel's least lies at an end of the scan where the loss had not levelled off (beyond the scan, where a form may
+    extrapolate, it may lie lower)."""
+    return bool(row.get("uniform")) and all(c.get("settled", True) for c in row.get("channels", []))
+
+
 def median_bound(entry, scenes=None):
     """The least median relMSE any calibration of the family can reach over ``scenes`` (default: the entry's):
-    each uniform scene at its floor (L1), each other scene at 0 (there a form may beat the floor) -> float or None."""
+    each scene whose floor bounds it (:func:`bounds`) at its floor (L1), each other scene at 0 -> float or None."""
     rows = entry.get("scenes") or {}
     names = [n for n in (scenes if scenes is not None else rows) if n in rows]
     if not names:
         return None
-    return statistics.median(rows[n]["relmse"] if rows[n].get("uniform") else 0.0 for n in names)
+    return statistics.median(rows[n]["relmse"] if bounds(rows[n]) else 0.0 for n in names)
 
 
 def run_floor(source, out=None, renderer=None, cache=True, progress=print, argv=None,

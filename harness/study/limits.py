@@ -25,7 +25,7 @@ headline, the extension families left out, and budget, by the study's first metr
   subject's budget, as ``sslpv-harness calibrate`` measured them (not re-rendered by the study); and
   each calibrated family's floor where one was written (``floor.json``, :mod:`harness.calibration.floor`):
   the scene at its own best scales per colour channel, what no calibration of the family beats where the
-  scene's terms are uniform. Held out far above the floor: the form's generalisation limits the scene;
+  scene's terms are uniform (and its least lies inside the scan of ``sigma_scale``). Held out far above the floor: the form's generalisation limits the scene;
   near it: the lattice itself.
 
 Limits: one subject per scene; a decomposition is reported as "not measured" with the reason when
@@ -182,7 +182,7 @@ def _mapping(subject, calibrations, budget):
 def _floors(scene, calibrations, key):
     """The scene's floor (Eq. L1 of :mod:`harness.calibration.floor`) in each calibrated family of the study that
     has one at ``key``, once per floor file."""
-    from harness.calibration.floor import floor_for
+    from harness.calibration.floor import bounds, floor_for
 
     out, seen = [], set()
     for cal in calibrations:
@@ -195,6 +195,7 @@ def _floors(scene, calibrations, key):
         seen.add(Path(path).resolve())
         out.append({"family": Path(path).parent.name, "budget": f"N={entry['N']} K={entry['steps']}",
                     "relmse": row["relmse"], "scalar": row["scalar"]["relmse"], "uniform": bool(row.get("uniform")),
+                    "bounds": bounds(row),
                     "energy_ratio": row.get("energy_ratio")})
     return out
 

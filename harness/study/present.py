@@ -110,7 +110,9 @@ def limit_lines(lim):
             out.append(f"Floor of the {f['family']} family ({f['budget']}, its floor.json): relMSE {g(f['relmse'])} with "
                        f"each colour channel at its own best scales, {g(f['scalar'])} with one pair (E {g(f['energy_ratio'])}"
                        f" at the former); " + ("no calibration of the family does better (terms uniform on the grid)."
-                                               if f["uniform"] else "a form may do better (terms vary on the grid)."))
+                                               if f["bounds"] else "a form may do better (terms vary on the grid)."
+                                               if not f["uniform"] else "a form may do better beyond the scan of "
+                                               "sigma_scale (a channel's least at its end)."))
     else:
         out.append(f"Mapping: not measured ({m['why']}).")
     return out
@@ -195,8 +197,9 @@ def target_table(t):
             varying = ", ".join(fl["varying"]) or "none"
             rows.append([name, "floor of the family: median relMSE, each fitted scene at its own best scales per "
                          f"colour channel (`{fl['file']}`; per scene, one pair: {g(fl['median_scalar'])}); the least "
-                         f"any calibration of the family can reach, with the scenes whose terms vary ({varying}) "
-                         "taken as 0", f"≤ {g(r['limit'])} to be reachable",
+                         "any calibration of the family can reach, with the scenes whose floor bounds no form (terms "
+                         f"that vary on the grid, or a least at the scan's end: {varying}) taken as 0",
+                         f"≤ {g(r['limit'])} to be reachable",
                          f"floor {g(fl['median'])}; least {g(fl['bound'])}",
                          "reachable" if fl["bound"] <= r["limit"] else "**out of reach**"])
     verdict = f"Target met at every budget: {_yes(t['met'])}. Where a scene misses, *What limits SSLPV here* gives the measured decomposition."

@@ -17,8 +17,8 @@ if the study rendered it, :func:`target` checks at the study's grid N and at eac
 
 Beside (T4), the **floor** of the calibration's family where one was written (``floor.json`` of the calibration
 or of its sources; :mod:`harness.calibration.floor`): the median over the fitted scenes of each scene at its own
-best ``(s, r)`` per colour channel (Eq. L1), and ``bound``, the same median with every scene whose terms vary over
-the grid taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
+best ``(s, r)`` per colour channel (Eq. L1), and ``bound``, the same median with every scene whose floor bounds no
+form (its terms vary over the grid, or its least lies at an end of the scan before the loss levelled off) taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
 ``bound``; where ``bound`` exceeds (T4)'s limit, (T4) is out of reach for the family.
 
 A scene of (T2) or (T3) that the calibration was fitted on is taken from its held-out validation like
@@ -103,7 +103,7 @@ def _baseline(sel, key):
 
 def _floor(report, key, fitted):
     """The family's floor at ``key`` over the ``fitted`` scenes (module docstring), or None where none was written."""
-    from harness.calibration.floor import floor_for, median_bound
+    from harness.calibration.floor import bounds, floor_for, median_bound
 
     entry, path = floor_for(report, key)
     if entry is None:
@@ -116,7 +116,7 @@ def _floor(report, key, fitted):
     return {"file": str(where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where),
             "median": statistics.median(rows[n]["relmse"] for n in names),
             "median_scalar": statistics.median(rows[n]["scalar"]["relmse"] for n in names),
-            "bound": median_bound(entry, names), "varying": [n for n in names if not rows[n].get("uniform")],
+            "bound": median_bound(entry, names), "varying": [n for n in names if not bounds(rows[n])],
             "scenes": len(names), "of": len(fitted)}
 
 
