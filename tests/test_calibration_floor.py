@@ -178,15 +178,18 @@ def test_committed_floor_matches_its_calibrations_oracle():
 
 
 def test_run_floor_end_to_end_on_a_small_calibration(tmp_path, capsys):
-    """``sslpv-harness calibrate`` on two small scenes, then the floor of its folder: the scan is served from the
-    result cache the calibration filled (no render), the file is written whole, and the scalar floor is the
-    calibration's oracle (there refined by renders at the optimum, here the spline of the scan's five samples)."""
+    """``sslpv-harness calibrate`` on two small scenes writes the floor beside the calibration; ``calibrate-floor`` on
+    its folder is served the scan from the result cache the calibration filled (no render) and writes the same
+    floor (the calibration's renders at its optima are not part of it), as does a run that renders the scan afresh;
+    the scalar floor is the calibration's oracle (there refined by renders at the optimum, here the spline of the
+    scan's five samples)."""
     from harness.cli import main
 
     out = tmp_path / "cal"
     assert main(["calibrate", "--family", "collision", "--scenes", "sphere_homogeneous,thin_ring", "--grid", "8",
                  "--steps", "4,steady", "--points", "5", "--no-progress", "--json", "--out", str(out)]) == 0
     capsys.readouterr()
+    written = json.loads((out / FILE).read_text())              # calibrate writes the floor from its own scan
     assert main(["calibrate-floor", "--from", str(out), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["renders"] == 0 and summary["served_from_cache"] == 2 * 5 * 2
@@ -195,7 +198,7 @@ def test_run_floor_end_to_end_on_a_small_calibration(tmp_path, capsys):
     assert {k: {"median": v["median"], "median_scalar": v["median_scalar"]}
             for k, v in on_disk["budgets"].items()} == summary["budgets"]
     again = run_floor(out, tmp_path / "floor.json", cache=False, progress=lambda m: None)      # rendered afresh
-    assert again["renders"] > 0 and again["budgets"] == on_disk["budgets"]
+    assert again["renders"] > 0 and again["budgets"] == on_disk["budgets"] == written["budgets"]
     cal = json.loads((out / "calibration.json").read_text())
     for label, b in on_disk["budgets"].items():
         assert set(b["scenes"]) == {"sphere_homogeneous", "thin_ring"}

@@ -19,6 +19,10 @@ and no choice of ``(s_c, r_c)`` does better than::
 the calibration's own oracle (``oracle`` of its ``calibration.json``, there by Brent on the spline and a
 render at the optimum); :func:`scene_floor` recomputes it on a fine grid as a second route.
 
+``sslpv-harness calibrate`` writes the floor beside every calibration it fits (:func:`floor_info`, from its own
+scan); ``sslpv-harness calibrate-floor`` writes it for an existing calibration (:func:`run_floor`). Both take the
+scan's samples alone (:func:`scan_samples`), so they write the same file.
+
 **What it bounds.** A scalar calibration gives a scene one ``(s, r)``: its relMSE there is at least ``S_i``.
 A form (F1 of :mod:`sslpv_gl.material_form`) gives each cell and channel the scales of that cell's terms; on a
 scene whose terms take one value per channel over every cell of the grid (``uniform``: a homogeneous medium
@@ -62,7 +66,7 @@ from harness.calibration.scan import budget_label
 from harness.errors import InputError
 
 __all__ = ["U_POINTS", "FILE", "channel_floor", "scene_floor", "terms_uniform", "run_floor", "read_floor", "floor_for",
-           "bounds", "median_bound"]
+           "bounds", "median_bound", "scan_samples", "floor_info"]
 
 #: Values of ``ln s`` on which the floor is searched (four times the loss form's table).
 U_POINTS = 769
@@ -183,11 +187,54 @@ def median_bound(entry, scenes=None):
     return statistics.median(rows[n]["relmse"] if bounds(rows[n]) else 0.0 for n in names)
 
 
+def scan_samples(samples, scan):
+    """``samples`` (:class:`~harness.calibration.fit.SceneSamples`) restricted to the ``sigma_scale`` values of
+    ``scan``: a calibration also renders at its fitted optima, and the floor is defined on the scan alone, so that
+    ``calibrate`` and ``calibrate-floor`` give the same file."""
+    from harness.calibration.fit import SceneSamples
+
+    want = [math.log(float(x)) for x in scan]
+    out = SceneSamples(samples.scene, samples.refs)
+    for u, img in zip(samples.u, samples.images):
+        if any(abs(u - w) < 1e-12 for w in want):
+            out.add(math.exp(u), img)
+    return out
+
+
+def floor_info(scanner, cal, settings, scenes, command, wall_s=None):
+    """The floor file's contents (every budget and scene of ``cal``, a calibration's report or what will be written
+    as one, with its ``oracle``) from ``scanner``, which holds the calibration's scan."""
+    names = list(cal["scenes"])
+    u_grid = scan_grid(cal["sigma_scan"], U_POINTS)
+    budgets = {}
+    for N, k in [(int(N), k) for N, k in cal["budgets"]]:
+        label = budget_label(N, k)
+        rows = {}
+        for n in names:
+            smp = scan_samples(scanner.samples[((N, k), n)], cal["sigma_scan"])
+            if len(smp.u) < 3:
+                continue
+            rows[n] = scene_floor(smp, u_grid) | {"uniform": terms_uniform(scenes[n], N, settings),
+                                                  "oracle": cal["results"][label]["oracle"][n]["relmse"]}
+        budgets[label] = {"N": N, "steps": k, "scenes": rows,
+                          "median": statistics.median(r["relmse"] for r in rows.values()) if rows else None,
+                          "median_scalar": (statistics.median(r["scalar"]["relmse"] for r in rows.values())
+                                            if rows else None)}
+    return {"format": "sslpv-calibration-floor", "family": cal["family"], "mapping": cal["mapping"],
+            "settings": settings, "scenes": names, "u_points": U_POINTS, "budgets": budgets,
+            "renders": scanner.renders, "served_from_cache": scanner.served,
+            "render_failures": [list(map(str, f)) for f in scanner.failures],
+            "gl_renderer": getattr(scanner.renderer, "gl_renderer", "unknown"),
+            "time": {"wall_s": wall_s}, "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "command": command}
+
+
 def run_floor(source, out=None, renderer=None, cache=True, progress=print, argv=None,
               command="python -m harness.calibration.floor"):
     """The floor of every scene and budget of the ``sslpv-harness calibrate`` folder ``source``, written to ``out``
     (default: :data:`FILE` beside its ``calibration.json``) -> the report dict. The scan's images come from the
-    result cache where an earlier run stored them (``cache``, :func:`harness.runs.cache.open_cache`'s argument)."""
+    result cache where an earlier run stored them (``cache``, :func:`harness.runs.cache.open_cache`'s argument).
+    ``sslpv-harness calibrate`` writes the same file beside a new calibration (:func:`floor_info`)."""
     from harness.calibration.form_files import read_sources
     from harness.calibration.scan import calibration_scanner
     from harness.io.atomic import atomic_write
@@ -201,35 +248,13 @@ def run_floor(source, out=None, renderer=None, cache=True, progress=print, argv=
     out = Path(out) if out is not None else source / FILE
     scanner, scenes, results_cache = calibration_scanner(cal, settings, source / "calibration.json", renderer, cache,
                                                          "calibration floor")
-    names = list(cal["scenes"])
-    for n in names:
+    for n in cal["scenes"]:
         for s in cal["sigma_scan"]:
             scanner.render(n, s)
         progress(f"scanned {n} at every sigma_scale of the calibration's scan")
-    u_grid = scan_grid(cal["sigma_scan"], U_POINTS)
-    budgets = {}
-    for N, k in [(int(N), k) for N, k in cal["budgets"]]:
-        label = budget_label(N, k)
-        uniform = {n: terms_uniform(scenes[n], N, settings) for n in names}
-        rows = {}
-        for n in names:
-            smp = scanner.samples[((N, k), n)]
-            if len(smp.u) < 3:
-                continue
-            rows[n] = scene_floor(smp, u_grid) | {"uniform": uniform[n],
-                                                  "oracle": cal["results"][label]["oracle"][n]["relmse"]}
-        budgets[label] = {"N": N, "steps": k, "scenes": rows,
-                          "median": statistics.median(r["relmse"] for r in rows.values()) if rows else None,
-                          "median_scalar": (statistics.median(r["scalar"]["relmse"] for r in rows.values())
-                                            if rows else None)}
-    info = {"format": "sslpv-calibration-floor", "family": cal["family"], "mapping": cal["mapping"],
-            "settings": settings, "source": str(source), "scenes": names, "u_points": U_POINTS, "budgets": budgets,
-            "renders": scanner.renders, "served_from_cache": scanner.served,
-            "render_failures": [list(map(str, f)) for f in scanner.failures],
-            "gl_renderer": getattr(scanner.renderer, "gl_renderer", "unknown"),
-            "time": {"wall_s": time.perf_counter() - t0},
-            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "out": str(out), "command": command + " " + " ".join(argv if argv is not None else ["--from", str(source)])}
+    info = floor_info(scanner, cal, settings, scenes,
+                      command + " " + " ".join(argv if argv is not None else ["--from", str(source)]),
+                      wall_s=time.perf_counter() - t0) | {"source": str(source), "out": str(out)}
     if results_cache is not None:
         results_cache.prune()
     with atomic_write(out) as tmp:

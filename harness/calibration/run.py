@@ -18,7 +18,8 @@ For a family (:mod:`harness.calibration.families`) and budgets ``(N, steps)`` it
    (:data:`~harness.calibration.families.COMPARED`) at the same budgets;
 5. **writes**, atomically (the folder appears complete or not at all): ``calibrated.toml``
    (the mapping: ``--mapping calibrated:DIR/calibrated.toml``), ``calibration.json``
-   (every figure) and ``index.html`` with its plots (:mod:`harness.calibration.page`).
+   (every figure), ``index.html`` with its plots (:mod:`harness.calibration.page`) and
+   ``floor.json``, the family's floor from the same scan (:mod:`harness.calibration.floor`).
 
 References are never rendered here: a scene without one at the calibration's size is an
 error naming the command that renders it. The default size is each scene's committed
@@ -273,7 +274,10 @@ def run_calibrate(family="diffusion", out=None, scenes=None, grids=DEFAULT_GRIDS
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "command": "sslpv-harness " + " ".join(argv) if argv else None,
     }
-    _write(out, info, scanner, refs)
+    from harness.calibration.floor import floor_info
+
+    floor = floor_info(scanner, info, fit_settings, scene_objs, info["command"], wall_s=None)
+    _write(out, info, scanner, refs, floor)
     return _summary(out, info)
 
 
@@ -418,7 +422,8 @@ def calibrated_toml(info):
     return "\n".join(lines) + "\n"
 
 
-def _write(out, info, scanner, refs):
+def _write(out, info, scanner, refs, floor=None):
+    from harness.calibration.floor import FILE
     from harness.calibration.page import write_page
     from harness.io.atomic import atomic_dir
     from sslpv_gl.calibrated import load_calibrated
@@ -429,6 +434,8 @@ def _write(out, info, scanner, refs):
         load_calibrated(tmp / "calibrated.toml", tuple(MAPPINGS))     # what we write must read back
         (tmp / "calibration.json").write_text(json.dumps(info, indent=1, default=_json_default) + "\n")
         write_page(tmp, info, scanner, refs)
+        if floor is not None:                     # the family's floor (harness.calibration.floor), from the same scan
+            (tmp / FILE).write_text(json.dumps(floor, indent=1, default=_json_default) + "\n")
 
 
 def _json_default(obj):

@@ -10,7 +10,7 @@ def configure(sp):
     from harness.calibration.families import FAMILIES
 
     sp.add_argument("--family", required=True, metavar="FAMILY", help=f"mapping family: {' | '.join(FAMILIES)}")
-    add_out(sp, "calibrated.toml, calibration.json, index.html; new, empty, or written by calibrate before",
+    add_out(sp, "calibrated.toml, calibration.json, index.html, floor.json; new, empty, or written by calibrate before",
             required=True)
     add_scenes(sp, default="every index-matched suite scene; at least 2")
     sp.add_argument("--grid", default="32", metavar="N,...",

@@ -170,6 +170,11 @@ FORM = (
               f"{LT}::test_the_studys_limits_give_each_familys_floor_once"),
              "a scene whose least lies at the scan's end, before the loss levelled off, taken as bounding a form that "
              "extrapolates beyond the scan"),
+    Mutation("floor_includes_refinement_samples", "mapping", "harness/calibration/floor.py",
+             "        if any(abs(u - w) < 1e-12 for w in want):\n            out.add(math.exp(u), img)",
+             "        out.add(math.exp(u), img)",
+             (f"{LT}::test_run_floor_end_to_end_on_a_small_calibration",),
+             "the floor calibrate writes taken on its refinement renders too, so it is not calibrate-floor's"),
     Mutation("study_floor_judged_on_its_median", "mapping", "harness/study/present.py",
              '"reachable" if fl["bound"] <= r["limit"]', '"reachable" if fl["median"] <= r["limit"]',
              (f"{TT}::test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero",),
