@@ -195,3 +195,18 @@ def test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero(tmp_path):
     fl = b["relmse"]["floor"]
     assert fl["median"] == pytest.approx(0.3) and fl["bound"] == 0.0 and fl["varying"] == FITTED[2:]
     assert target_table(t)[1][-1][4] == "reachable"
+
+
+def test_a_fitted_scene_without_a_floor_row_counts_as_zero(tmp_path):
+    """Two of five fitted scenes have no floor row (too few usable samples): they cannot bound anything, so the least
+    median is that of (0, 0, f, f, f)."""
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.08) for s in FITTED})
+    _floor(tmp_path / "form", {s: 0.3 for s in FITTED[:3]})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    _, b = _groups(t, 32)
+    fl = b["relmse"]["floor"]
+    assert fl["median"] == pytest.approx(0.3) and fl["bound"] == pytest.approx(0.3)
+    assert fl["varying"] == FITTED[3:] and (fl["scenes"], fl["of"]) == (3, 5)
+    _floor(tmp_path / "form", {s: 0.3 for s in FITTED[:2]})
+    fl = _groups(target(_rows(), cals, BUDGET, _scenes(), selection=sel), 32)[1]["relmse"]["floor"]
+    assert fl["bound"] == 0.0

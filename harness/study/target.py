@@ -18,7 +18,8 @@ if the study rendered it, :func:`target` checks at the study's grid N and at eac
 Beside (T4), the **floor** of the calibration's family where one was written (``floor.json`` of the calibration
 or of its sources; :mod:`harness.calibration.floor`): the median over the fitted scenes of each scene at its own
 best ``(s, r)`` per colour channel (Eq. L1), and ``bound``, the same median with every scene whose floor bounds no
-form (its terms vary over the grid, or its least lies at an end of the scan before the loss levelled off) taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
+form (its terms vary over the grid, or its least lies at an end of the scan before the loss levelled off), and every
+fitted scene the floor has no row for, taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
 ``bound``; where ``bound`` exceeds (T4)'s limit, (T4) is out of reach for the family.
 
 A scene of (T2) or (T3) that the calibration was fitted on is taken from its held-out validation like
@@ -116,7 +117,9 @@ def _floor(report, key, fitted):
     return {"file": str(where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where),
             "median": statistics.median(rows[n]["relmse"] for n in names),
             "median_scalar": statistics.median(rows[n]["scalar"]["relmse"] for n in names),
-            "bound": median_bound(entry, names), "varying": [n for n in names if not bounds(rows[n])],
+            "bound": statistics.median([median_bound(entry, [n]) if bounds(rows[n]) else 0.0 for n in names]
+                                       + [0.0] * (len(fitted) - len(names))),
+            "varying": [n for n in names if not bounds(rows[n])] + [n for n in fitted if n not in rows],
             "scenes": len(names), "of": len(fitted)}
 
 

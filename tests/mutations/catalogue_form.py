@@ -175,6 +175,11 @@ FORM = (
              "        out.add(math.exp(u), img)",
              (f"{LT}::test_run_floor_end_to_end_on_a_small_calibration",),
              "the floor calibrate writes taken on its refinement renders too, so it is not calibrate-floor's"),
+    Mutation("study_floor_drops_scenes_without_a_row", "mapping", "harness/study/target.py",
+             "+ [0.0] * (len(fitted) - len(names))),", "),",
+             (f"{TT}::test_a_fitted_scene_without_a_floor_row_counts_as_zero",),
+             "the least median of the study's target taken over the scenes with a floor row, as though the others "
+             "were bounded"),
     Mutation("study_floor_judged_on_its_median", "mapping", "harness/study/present.py",
              '"reachable" if fl["bound"] <= r["limit"]', '"reachable" if fl["median"] <= r["limit"]',
              (f"{TT}::test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero",),
