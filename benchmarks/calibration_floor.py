@@ -59,9 +59,11 @@ def _family_table(floors):
 
 
 def _limit(sel, label):
-    meds = [c["budgets"][label]["median_held_out_relmse"] for c in sel["candidates"]
-            if not c.get("form") and label in c.get("budgets", {})]
-    return 0.5 * min(meds) if meds else None
+    """The study's relMSE limit at ``label`` (:mod:`harness.study.target`, T4), or None."""
+    from harness.study.target import RELMSE_FACTOR, _baseline
+
+    base = _baseline(sel, label)
+    return RELMSE_FACTOR * base[1] if base else None
 
 
 def _best(floors):

@@ -123,14 +123,10 @@ def scene_floor(samples, u_grid, ref="full"):
 def terms_uniform(scene, N, settings, rtol=1e-6):
     """True when the terms of (F1) other than the extent take one value per colour channel over every cell of the
     LPV grid at ``N`` (the medium as the renderer resamples it): then a form is one ``(s_c, r_c)`` per channel."""
-    from sslpv_gl.material import delta_eddington, resample_medium
+    from harness.calibration.form import grid_medium
     from sslpv_gl.material_form import cell_numbers
 
-    med = scene.medium
-    st, a, g = resample_medium(med, N, settings["resample"])
-    if settings.get("phase_scaling", "none") == "delta-eddington":
-        st, a, g = delta_eddington(st, a, g)
-    dx = float(np.asarray(med.bbox_max, np.float64)[0] - np.asarray(med.bbox_min, np.float64)[0]) / N
+    st, a, g, dx = grid_medium(scene, N, settings)
     numbers = cell_numbers(st, a, g, dx, float(scene.boundary.eta))
     for name, x in numbers.items():
         if name == "ln_extent_per_step":
@@ -179,12 +175,13 @@ def bounds(row):
 
 def median_bound(entry, scenes=None):
     """The least median relMSE any calibration of the family can reach over ``scenes`` (default: the entry's):
-    each scene whose floor bounds it (:func:`bounds`) at its floor (L1), each other scene at 0 -> float or None."""
+    each scene whose floor bounds it (:func:`bounds`) at its floor (L1), each other scene, and each scene the entry
+    has no row for (too few usable samples), at 0 -> float, or None when the entry has none of ``scenes``."""
     rows = entry.get("scenes") or {}
-    names = [n for n in (scenes if scenes is not None else rows) if n in rows]
-    if not names:
+    names = list(scenes if scenes is not None else rows)
+    if not any(n in rows for n in names):
         return None
-    return statistics.median(rows[n]["relmse"] if bounds(rows[n]) else 0.0 for n in names)
+    return statistics.median(rows[n]["relmse"] if n in rows and bounds(rows[n]) else 0.0 for n in names)
 
 
 def scan_samples(samples, scan):
@@ -206,7 +203,7 @@ def floor_info(scanner, cal, settings, scenes, command, wall_s=None):
     as one, with its ``oracle``) from ``scanner``, which holds the calibration's scan."""
     names = list(cal["scenes"])
     u_grid = scan_grid(cal["sigma_scan"], U_POINTS)
-    budgets = {}
+    budgets, uniform = {}, {}
     for N, k in [(int(N), k) for N, k in cal["budgets"]]:
         label = budget_label(N, k)
         rows = {}
@@ -214,7 +211,9 @@ def floor_info(scanner, cal, settings, scenes, command, wall_s=None):
             smp = scan_samples(scanner.samples[((N, k), n)], cal["sigma_scan"])
             if len(smp.u) < 3:
                 continue
-            rows[n] = scene_floor(smp, u_grid) | {"uniform": terms_uniform(scenes[n], N, settings),
+            if (n, N) not in uniform:                          # the same at every budget of a grid
+                uniform[(n, N)] = terms_uniform(scenes[n], N, settings)
+            rows[n] = scene_floor(smp, u_grid) | {"uniform": uniform[(n, N)],
                                                   "oracle": cal["results"][label]["oracle"][n]["relmse"]}
         budgets[label] = {"N": N, "steps": k, "scenes": rows,
                           "median": statistics.median(r["relmse"] for r in rows.values()) if rows else None,

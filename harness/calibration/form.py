@@ -89,20 +89,29 @@ def budget_terms(steps):
     return tuple(t for t in TERMS if isinstance(steps, int) or t != "ln_extent_per_step")
 
 
+def grid_medium(scene, N, settings):
+    """The scene's medium on the LPV grid at ``N`` as the renderer maps it: ``(sigma_t, albedo, g, dx)`` after
+    the fit's resampling and phase scaling (``settings``), with ``dx`` the cell width."""
+    from sslpv_gl.material import delta_eddington, resample_medium
+
+    med = scene.medium
+    st, a, g = resample_medium(med, N, settings["resample"])
+    if settings.get("phase_scaling", "none") == "delta-eddington":
+        st, a, g = delta_eddington(st, a, g)
+    dx = float(np.asarray(med.bbox_max, np.float64)[0] - np.asarray(med.bbox_min, np.float64)[0]) / N
+    return st, a, g, dx
+
+
 def scene_terms(scene, N, steps, settings, per_channel=False):
     """The scene-level terms of (F1) at grid ``N`` and step count ``steps``: each term's mean over the
     inside cells and colours of the medium as the renderer maps it (same resampling, phase scaling, eta);
     ``per_channel``: a list of three such lists, each the mean over the inside cells of one colour (Eq. F9)."""
     from harness.scene.geometry import grid_inside
-    from sslpv_gl.material import delta_eddington, resample_medium
     from sslpv_gl.material_form import cell_numbers, extent_cells, mean_numbers
 
     med = scene.medium
     inside = grid_inside(scene.mesh, med.bbox_min, med.bbox_max, N)
-    st, a, g = resample_medium(med, N, settings["resample"])
-    if settings.get("phase_scaling", "none") == "delta-eddington":
-        st, a, g = delta_eddington(st, a, g)
-    dx = float(np.asarray(med.bbox_max, np.float64)[0] - np.asarray(med.bbox_min, np.float64)[0]) / N
+    st, a, g, dx = grid_medium(scene, N, settings)
     numbers = cell_numbers(st, a, g, dx, float(scene.boundary.eta), extent_cells(inside, N), steps)
     if per_channel:
         out = []

@@ -190,9 +190,9 @@ def _floors(scene, calibrations, key):
             continue
         entry, path = floor_for(cal["report"], key)
         row = (entry or {}).get("scenes", {}).get(scene)
-        if row is None or Path(path).resolve() in seen:
+        if row is None or path.resolve() in seen:
             continue
-        seen.add(Path(path).resolve())
+        seen.add(path.resolve())
         out.append({"family": Path(path).parent.name, "budget": f"N={entry['N']} K={entry['steps']}",
                     "relmse": row["relmse"], "scalar": row["scalar"]["relmse"], "uniform": bool(row.get("uniform")),
                     "bounds": bounds(row),

@@ -117,8 +117,7 @@ def _floor(report, key, fitted):
     return {"file": str(where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where),
             "median": statistics.median(rows[n]["relmse"] for n in names),
             "median_scalar": statistics.median(rows[n]["scalar"]["relmse"] for n in names),
-            "bound": statistics.median([median_bound(entry, [n]) if bounds(rows[n]) else 0.0 for n in names]
-                                       + [0.0] * (len(fitted) - len(names))),
+            "bound": median_bound(entry, fitted),
             "varying": [n for n in names if not bounds(rows[n])] + [n for n in fitted if n not in rows],
             "scenes": len(names), "of": len(fitted)}
 
