@@ -127,8 +127,7 @@ small_reference_rel_se = 0.03
 
 def _reference(folder):
     """Render (or fetch from the reference cache) a generated scene's reference -> the command's JSON."""
-    cmd = [str(ROOT / ".venv" / "bin" / "sslpv-harness"), "reference", str(folder), "--max-minutes", "4", "--json",
-           "--no-progress"]
+    cmd = [sys.executable, "-m", "harness.cli", "reference", str(folder), "--max-minutes", "4", "--json", "--no-progress"]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if done.returncode != 0:
         sys.exit(f"error: {folder}: reference: {done.stderr.strip().splitlines()[-1:]}")
