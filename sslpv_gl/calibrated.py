@@ -126,7 +126,8 @@ class Calibrated:
                 flag = "--" + name.replace("_", "-")
                 raise InputError(flag, name, f"{self.path} was calibrated with {name}={want!r}, this render has "
                                  f"{name}={have!r}", f"pass {flag} {str(want).lower() if isinstance(want, bool) else want}"
-                                 " with this mapping, or calibrate it again with these settings")
+                                 f" with this mapping (or leave {flag} out: the file's value is then used), or "
+                                 "calibrate it again with these settings")
 
     def budget(self, N, steps, where="--mapping"):
         """The parameter set for ``(N, steps)``, or an InputError listing the budgets there are (naming

@@ -135,6 +135,23 @@ class SSLPVParams:
             bad("skip", f"skip {self.skip} must not exceed steps {self.steps} (nothing would be accumulated)",
                 "lower --skip")
 
+    @classmethod
+    def given(cls, **fields):
+        """The parameters of a command, a sweep's product or a study: ``fields`` are the settings given
+        explicitly, and for ``mapping = "calibrated:PATH"`` every renderer setting the file was fitted with
+        (its ``[settings]``, :data:`sslpv_gl.calibrated.SETTINGS`) that ``fields`` does not give is the
+        file's, so ``--mapping calibrated:PATH`` alone renders with the calibration's outside treatment,
+        phase scaling, boundary reflection and the rest. A setting given explicitly that differs from the
+        file's is refused in one line by the constructor (:meth:`Calibrated.check_settings`), as before;
+        a plain mapping takes the defaults of this class for what is not given."""
+        path = parse_mapping(fields.get("mapping"))
+        if path is not None:
+            from .calibrated import SETTINGS
+
+            cal = load_calibrated(path, tuple(MAPPINGS))
+            fields = {**{k: cal.settings[k] for k in SETTINGS if k not in fields}, **fields}
+        return cls(**fields)
+
     @staticmethod
     def doc(name):
         """The one-line description of a field."""

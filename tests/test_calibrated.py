@@ -132,6 +132,46 @@ class TestSettings:
         assert "\n" not in msg and msg.startswith(f"{flag}: ") and "was calibrated with" in msg and "pass " + flag in msg
 
 
+class TestTheFilesSettings:
+    """``--mapping calibrated:PATH`` alone renders with the settings the file was fitted with; a setting given
+    explicitly with another value is refused in one line."""
+
+    ABSORB = GOOD.replace('outside = "vacuum"', 'outside = "absorb"').replace("skip = 0", "skip = 1")
+
+    def test_a_setting_not_given_is_the_files(self, tmp_path):
+        from harness.methods import get_method
+
+        p = write(tmp_path, self.ABSORB)
+        params = get_method("sslpv").make_params(N=32, steps=8, mapping=f"calibrated:{p}")
+        assert (params.outside, params.skip) == ("absorb", 1)
+        assert params.resolved().sigma_scale == 1.5
+
+    def test_a_plain_mapping_keeps_the_defaults(self, tmp_path):
+        from harness.methods import get_method
+        from sslpv_gl.params import SSLPVParams
+
+        params = get_method("sslpv").make_params(N=32, steps=8, mapping="collision")
+        assert params == SSLPVParams(N=32, steps=8, mapping="collision")
+
+    def test_a_setting_given_with_another_value_is_refused(self, tmp_path):
+        from harness.methods import get_method
+
+        p = write(tmp_path, self.ABSORB)
+        with pytest.raises(InputError) as exc:
+            get_method("sslpv").make_params(N=32, steps=8, mapping=f"calibrated:{p}", outside="vacuum")
+        msg = str(exc.value)
+        assert "\n" not in msg and msg.startswith("--outside: ") and "pass --outside absorb" in msg
+        assert get_method("sslpv").make_params(N=32, steps=8, mapping=f"calibrated:{p}", outside="absorb").skip == 1
+
+    def test_a_sweep_product_gives_each_mapping_its_own(self, tmp_path):
+        from harness.runs.params import expand
+
+        p = write(tmp_path, self.ABSORB)
+        got = expand({"mapping": ["collision", f"calibrated:{p}"], "N": [32], "steps": [8]})
+        assert [(q.mapping.split(":")[0], q.outside, q.skip) for q in got] == [("collision", "vacuum", 2),
+                                                                             ("calibrated", "absorb", 1)]
+
+
 def test_a_relative_path_is_found_from_the_repository(tmp_path, monkeypatch):
     """Matrices name committed mappings relative to the repository; that works from any folder."""
     import shutil
@@ -152,3 +192,47 @@ def test_a_relative_path_is_found_from_the_repository(tmp_path, monkeypatch):
         assert resolve_path("no/such.toml") == Path("no/such.toml")
     finally:
         shutil.rmtree(folder)
+
+
+class TestTheFilesSettingsCommandLine:
+    """Through ``sslpv-harness render`` with the committed calibrations fitted over extensions."""
+
+    @pytest.fixture
+    def cli(self, tmp_path, capsys, monkeypatch):
+        from tests.test_bad_input import one_line_runner
+
+        return one_line_runner(tmp_path, capsys, monkeypatch)
+
+    @pytest.mark.parametrize("folder, flags, needle", [
+        ("collision_absorb", ["--outside", "vacuum"], "--outside: outside: "),
+        ("collision_delta_eddington", ["--phase-scaling", "none"], "--phase-scaling: phase_scaling: "),
+        ("transport", ["--skip", "0"], "--skip: skip: "),
+    ])
+    def test_an_explicit_setting_of_another_extension_is_one_line(self, cli, folder, flags, needle):
+        cli(["render", "thin_ring", "--out", "o", "--steps", "8", "--mapping",
+             f"calibrated:baselines/calibrated/{folder}/calibrated.toml", *flags], needle, "was calibrated with")
+
+    @pytest.mark.gl
+    def test_the_mapping_alone_renders_as_with_the_files_flags(self, tmp_path, capsys):
+        """The committed ``collision_absorb`` calibration: ``--mapping`` alone gives the image of ``--mapping`` with
+        ``--outside absorb`` given, bit for bit, and records ``outside = absorb``; the plain family without the flag
+        (``vacuum``) renders another image."""
+        import json
+
+        import numpy as np
+
+        from harness.cli import main
+        from harness.io.images import read_exr
+
+        m = "calibrated:baselines/calibrated/collision_absorb/calibrated.toml"
+        runs = {"alone": ["--mapping", m], "flag": ["--mapping", m, "--outside", "absorb"],
+                "vacuum": ["--mapping", "collision", "--sigma-scale", "1", "--outside", "vacuum"]}
+        imgs = {}
+        for name, extra in runs.items():
+            assert main(["render", "thin_ring", "--size", "small", "--steps", "8", "--out", str(tmp_path / name),
+                         *extra]) == 0
+            imgs[name] = read_exr(tmp_path / name / "subsurface.exr")["rgb"]
+        capsys.readouterr()
+        assert json.loads((tmp_path / "alone" / "render.json").read_text())["params"]["outside"] == "absorb"
+        assert np.array_equal(imgs["alone"], imgs["flag"])
+        assert not np.array_equal(imgs["alone"], imgs["vacuum"])

@@ -45,6 +45,11 @@ class SSLPVMethod(Method):
         self.params_type = SSLPVParams
         self._renderer = None
 
+    def make_params(self, **fields):
+        """Validated parameters from the settings given; a calibrated mapping brings the settings it was fitted
+        with for the ones not given (:meth:`sslpv_gl.params.SSLPVParams.given`)."""
+        return self.params_type.given(**fields)
+
     def label(self, params):
         """``N32-K16-collision``: the paper's three axes, then any non-default setting (as before methods)."""
         p = params if isinstance(params, dict) else params.as_dict()

@@ -185,4 +185,15 @@ FORM = (
              '"reachable" if fl["bound"] <= r["limit"]', '"reachable" if fl["median"] <= r["limit"]',
              (f"{TT}::test_the_floor_bound_takes_scenes_whose_terms_vary_as_zero",),
              "the study calls the relMSE target out of reach on the floor's median, not the least median any form can reach"),
+    Mutation("calibrated_settings_not_the_files", "mapping", "harness/methods/sslpv.py",
+             "return self.params_type.given(**fields)", "return self.params_type(**fields)",
+             ("tests/test_calibrated.py::TestTheFilesSettings::test_a_setting_not_given_is_the_files",
+              "tests/test_calibrated.py::TestTheFilesSettings::test_a_sweep_product_gives_each_mapping_its_own"),
+             "--mapping calibrated:PATH alone renders with the default settings, not the file's (a calibration "
+             "fitted with --outside absorb is then refused unless the flag is repeated)"),
+    Mutation("calibrated_file_overrides_explicit_settings", "mapping", "sslpv_gl/params.py",
+             "fields = {**{k: cal.settings[k] for k in SETTINGS if k not in fields}, **fields}",
+             "fields = {**fields, **{k: cal.settings[k] for k in SETTINGS}}",
+             ("tests/test_calibrated.py::TestTheFilesSettings::test_a_setting_given_with_another_value_is_refused",),
+             "a setting given explicitly is silently replaced by the calibrated file's, instead of refused"),
 )
