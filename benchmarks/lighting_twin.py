@@ -154,8 +154,7 @@ def main(argv=None):
     rel_se = np.sqrt((se_a / t_a) ** 2 + (se_b / t_b) ** 2)
 
     renderer = SSLPVRenderer()
-    name = "lighting_twin" if args.scene == "backlit_sphere" else "lighting_twin_" + Path(args.scene).name
-    page = Page(name, f"What no calibration that depends on the material can do for a back-lit object: "
+    page = Page(_page_name(args), f"What no calibration that depends on the material can do for a back-lit object: "
                 f"{args.scene} and its lighting twin")
     page.gl_renderer = renderer.gl_renderer
     lights = "; ".join(f"({', '.join(f'{x:.3g}' for x in lt.position)})" for lt in scene.lights)
@@ -260,6 +259,50 @@ def main(argv=None):
                note=f"`--mapping calibrated:{BEST.relative_to(BEST.parents[3])}` at N = {args.grid}; energy ratio "
                     "against the truth above (the mean of the per-channel ratios).")
     page.finish(args.write)
+    if args.write:                                 # after the page: its header checks the tree is clean
+        write_verdicts(args, scene, results)
+
+
+#: The committed verdicts the study reads (:func:`harness.study.limits.lighting`): one file per scene.
+VERDICTS = Path(__file__).resolve().parents[1] / "baselines" / "lighting_twin"
+
+
+def write_verdicts(args, scene, results):
+    """``baselines/lighting_twin/<scene>.json``: per budget and setting, the attainable interval (W3) and the
+    verdict (W4), with the scene's content hash, the grid, the command and the commit that wrote them."""
+    import json
+    from datetime import datetime, timezone
+
+    from page import command_line, commit_state
+
+    from harness.io.atomic import atomic_write
+    from harness.study import twin
+    from harness.study.target import ENERGY_RANGE
+
+    commit, dirty = commit_state()
+    budgets = {}
+    for b in BUDGETS:
+        rows = {}
+        for name, _q, low, high, _i_lo, _i_hi, bad in results[b]:
+            if low is None:
+                rows[name] = {"usable": False}
+                continue
+            v = twin.verdict(low, high, ENERGY_RANGE)
+            rows[name] = {"usable": True, "low": low, "high": high, "possible": v["possible"],
+                          "twin_at_least": v["twin_at_least"], "unusable_points": bad}
+        budgets[str(b)] = rows
+    data = {"format": "sslpv-lighting-twin", "scene": scene.name, "content_hash": scene.content_hash,
+            "grid": args.grid, "energy_range": list(ENERGY_RANGE), "band": list(twin.verdict(1.0, 1.0, ENERGY_RANGE)["band"]),
+            "sigma_scales": list(SIGMA_SCALES), "budgets": budgets, "page": f"docs/benchmarks/{_page_name(args)}.md",
+            "command": command_line(), "commit": commit + (" (with uncommitted changes)" if dirty else ""),
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    VERDICTS.mkdir(parents=True, exist_ok=True)
+    with atomic_write(VERDICTS / f"{scene.name}.json") as tmp:
+        Path(tmp).write_text(json.dumps(data, indent=1) + "\n")
+
+
+def _page_name(args):
+    return "lighting_twin" if args.scene == "backlit_sphere" else "lighting_twin_" + Path(args.scene).name
 
 
 if __name__ == "__main__":
