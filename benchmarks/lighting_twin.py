@@ -291,7 +291,10 @@ def write_verdicts(args, scene, results):
             rows[name] = {"usable": True, "low": low, "high": high, "possible": v["possible"],
                           "twin_at_least": v["twin_at_least"], "unusable_points": bad}
         budgets[str(b)] = rows
-    data = {"format": "sslpv-lighting-twin", "scene": scene.name, "content_hash": scene.content_hash,
+    from harness.scene import load_scene
+
+    # the scene as its file declares it (the study's limits load it so), not at the reference's size
+    data = {"format": "sslpv-lighting-twin", "scene": scene.name, "content_hash": load_scene(args.scene).content_hash,
             "grid": args.grid, "energy_range": list(ENERGY_RANGE), "band": list(twin.verdict(1.0, 1.0, ENERGY_RANGE)["band"]),
             "sigma_scales": list(SIGMA_SCALES), "budgets": budgets, "page": f"docs/benchmarks/{_page_name(args)}.md",
             "command": command_line(), "commit": commit + (" (with uncommitted changes)" if dirty else ""),

@@ -140,3 +140,74 @@ def test_a_scan_is_the_renderers_own_and_refuses_a_varying_medium(backlit, rende
     veins = _reference("jade_veins", None)[0]
     with pytest.raises(InputError, match="medium"):
         twin.scan(renderer, veins, veins, p, (1.0,), (4,), mask)
+
+
+def _verdict_file(folder, scene, grid=32, content_hash=None):
+    """A verdicts file as ``benchmarks/lighting_twin.py --write`` writes it: at K = 32 no setting can put both in
+    range (the closest, ``b``, reaches 0.02: the twin at least 0.8 / 0.02 = 40 times its truth); at steady one can."""
+    import json
+
+    rows32 = {"a": {"usable": True, "low": 1e-4, "high": 0.01, "possible": False, "twin_at_least": 80.0},
+              "b": {"usable": True, "low": 0.005, "high": 0.02, "possible": False, "twin_at_least": 40.0},
+              "c": {"usable": False}}
+    rows_steady = {"a": {"usable": True, "low": 0.5, "high": 1.2, "possible": True, "twin_at_least": 0.667},
+                   "b": {"usable": True, "low": 0.1, "high": 0.3, "possible": False, "twin_at_least": 2.67},
+                   "c": {"usable": True, "low": 0.7, "high": 0.9, "possible": True, "twin_at_least": 0.889}}
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{scene.name}.json").write_text(json.dumps({
+        "format": "sslpv-lighting-twin", "scene": scene.name, "content_hash": content_hash or scene.content_hash,
+        "grid": grid, "budgets": {"32": rows32, "steady": rows_steady}, "page": "docs/benchmarks/x.md",
+        "command": "python benchmarks/lighting_twin.py", "commit": "abc"}))
+
+
+def test_committed_verdicts_count_the_settings_and_take_the_closest(backlit, tmp_path):
+    _verdict_file(tmp_path, backlit)
+    got = twin.committed_verdicts(backlit, 32, tmp_path)
+    assert got["measured"] and got["page"] == "docs/benchmarks/x.md"
+    assert got["budgets"]["32"] == {"possible": 0, "of": 3, "closest": "b", "largest": 0.02, "twin_at_least": 40.0}
+    assert got["budgets"]["steady"] == {"possible": 2, "of": 3, "closest": "a", "largest": 1.2,
+                                        "twin_at_least": 0.667}
+
+
+def test_committed_verdicts_of_another_grid_or_a_changed_scene_are_not_used(backlit, tmp_path):
+    _verdict_file(tmp_path / "g", backlit, grid=16)
+    assert "N = 16" in twin.committed_verdicts(backlit, 32, tmp_path / "g")["why"]
+    _verdict_file(tmp_path / "h", backlit, content_hash="0" * 64)
+    assert "changed" in twin.committed_verdicts(backlit, 32, tmp_path / "h")["why"]
+    assert "lighting_twin.py --scene backlit_sphere" in twin.committed_verdicts(backlit, 32, tmp_path / "none")["why"]
+
+
+def test_the_studys_limits_say_what_the_lighting_twin_found(tmp_path, monkeypatch):
+    """``harness.study.limits.lighting`` keeps the study's budgets, and the line of *What limits SSLPV here* names
+    the count of settings per budget and, where none can, the least the other lighting renders at."""
+    from harness.scene import load_scene
+    from harness.study import limits, present
+
+    _verdict_file(tmp_path, load_scene("backlit_sphere"))
+    monkeypatch.setattr(twin, "VERDICTS", tmp_path)
+    got = limits.lighting("backlit_sphere", {"grid": 32, "steps": [8, 32]})
+    assert list(got["budgets"]) == ["32"]
+    got = limits.lighting("backlit_sphere", {"grid": 32, "steps": [32, "steady"]})
+    line = [x for x in present.limit_lines({
+        "subject": "s", "relmse": 0.1, "floor": 0.01, "steps": {"measured": False, "why": "-"},
+        "outside": {"measured": False, "why": "-"}, "boundary": {"measured": False, "why": "-"},
+        "mapping": {"measured": False, "why": "-"}, "lighting": got}) if x.startswith("Lighting twin")]
+    assert len(line) == 1
+    assert "K = 32: 0 of 3 (with the closest, b, the other lighting renders at least 40 times" in line[0]
+    assert "steady: 2 of 3." in line[0]
+    assert not limits.lighting("sphere_homogeneous", {"grid": 32, "steps": [32]})["measured"]
+
+
+def test_the_committed_verdicts_are_of_the_scenes_as_they_are():
+    """Every committed verdicts file judges its scene as the scene's file declares it now (a changed scene is
+    reported as not measured, so a stale file would silently drop its line from the study)."""
+    import json
+
+    from harness.scene import load_scene
+
+    files = sorted(twin.VERDICTS.glob("*.json"))
+    for path in files:
+        data = json.loads(path.read_text())
+        got = twin.committed_verdicts(load_scene(data["scene"]), data["grid"])
+        assert got["measured"], (path.name, got)
+        assert set(got["budgets"]) == {"8", "16", "32", "64", "steady"}

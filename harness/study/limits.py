@@ -1,7 +1,7 @@
 """What limits SSLPV on each scene, from measured decompositions where the study has the data.
 
 For each scene the *subject* is the best SSLPV setting of the headline (over every SSLPV family of the
-headline, the extension families left out, and budget, by the study's first metric). Five decompositions, each present only where measured:
+headline, the extension families left out, and budget, by the study's first metric). Six decompositions, each present only where measured:
 
 * **steps** (``K`` against ``steady``): the subject's family and settings at ``steady`` against the
   subject at its own K; a paired difference against the scene's reference (delta method), so the
@@ -27,6 +27,12 @@ headline, the extension families left out, and budget, by the study's first metr
   the scene at its own best scales per colour channel, what no calibration of the family beats where the
   scene's terms are uniform (and its least lies inside the scan of ``sigma_scale``). Held out far above the floor: the form's generalisation limits the scene;
   near it: the lattice itself.
+
+* **lighting** (what no calibration of the material can do for this lighting): where
+  ``benchmarks/lighting_twin.py`` committed the scene's verdicts (``baselines/lighting_twin/<scene>.json``,
+  :func:`harness.study.twin.committed_verdicts`), per budget how many of the renderer's settings can put the
+  scene and the same object lit from the other side both in the energy range (Eq. W3), and what a calibration
+  that puts the scene in range does to that twin (Eq. W4). Computed by the benchmark, not by the study.
 
 Limits: one subject per scene; a decomposition is reported as "not measured" with the reason when
 its data is missing; the steps decomposition compares the same N only.
@@ -201,7 +207,7 @@ def _floors(scene, calibrations, key):
 
 
 def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
-    """``{scene: {"subject", "steps", "outside", "boundary", "speed", "mapping"}}`` (see the module docstring)."""
+    """``{scene: {"subject", "steps", "outside", "boundary", "speed", "mapping", "lighting"}}`` (see the module docstring)."""
     images = images or _Images()
     out = {}
     for scene in scenes:
@@ -213,5 +219,20 @@ def limits(rows, scenes, metric, twins, calibrations, budget, images=None):
         out[scene] = {"subject": s["setting"], "relmse": s["subsurface_relmse"],
                       "floor": s["subsurface_relmse_floor"], "steps": _steps(rows, s, images),
                       "outside": _outside(rows, s), "boundary": _boundary(rows, s, twins),
-                      "speed": _speed(rows, scene, metric, budget), "mapping": _mapping(s, calibrations, budget)}
+                      "speed": _speed(rows, scene, metric, budget), "mapping": _mapping(s, calibrations, budget),
+                      "lighting": lighting(scene, budget)}
     return out
+
+
+def lighting(scene, budget):
+    """The committed lighting-twin verdicts of ``scene`` at the study's grid, for its budgets
+    (:func:`harness.study.twin.committed_verdicts`)."""
+    from harness.scene import load_scene
+    from harness.study.twin import VERDICTS, committed_verdicts, no_verdicts
+
+    if not (VERDICTS / f"{scene}.json").is_file():          # the scene is loaded only where a file may judge it
+        return {"measured": False, "why": no_verdicts(scene)}
+    got = committed_verdicts(load_scene(scene), budget["grid"])
+    if got["measured"]:
+        got["budgets"] = {k: v for k, v in got["budgets"].items() if k in {str(b) for b in budget["steps"]}}
+    return got

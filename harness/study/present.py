@@ -115,6 +115,19 @@ def limit_lines(lim):
                                                "sigma_scale (a channel's least at its end)."))
     else:
         out.append(f"Mapping: not measured ({m['why']}).")
+    lt = lim.get("lighting")
+    if lt and lt["measured"] and lt["budgets"]:
+        parts = []
+        for steps, v in lt["budgets"].items():
+            k = "steady" if steps == "steady" else f"K = {steps}"
+            parts.append(f"{k}: {v['possible']} of {v['of']}" + ("" if v["possible"] else
+                         f" (with the closest, {v['closest']}, the other lighting renders at least "
+                         f"{g(v['twin_at_least'])} times its truth when this one is in range)"))
+        out.append(f"Lighting twin ({lt['page']}): a calibration of the material gives this scene and the same object "
+                   "lit from the other side the same scales; settings of the renderer that can put both in the energy "
+                   "target: " + "; ".join(parts) + ".")
+    elif lt:
+        out.append(f"Lighting twin: not measured ({lt.get('why', 'none of the study budgets')}).")
     return out
 
 

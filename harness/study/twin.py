@@ -49,13 +49,19 @@ Limits:
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import numpy as np
 
 from harness.errors import InputError
 from harness.reference.path_length import constant_channels
 
-__all__ = ["mirror_light", "lighting_twin", "check_homogeneous", "channel_energies", "twin_factors", "attainable", "verdict", "scan"]
+__all__ = ["mirror_light", "lighting_twin", "check_homogeneous", "channel_energies", "twin_factors", "attainable", "verdict", "scan",
+           "committed_verdicts", "VERDICTS"]
+
+#: The verdicts ``benchmarks/lighting_twin.py --write`` commits, one ``<scene>.json`` per scene.
+VERDICTS = Path(__file__).resolve().parents[2] / "baselines" / "lighting_twin"
 
 
 def mirror_light(position, centre, camera):
@@ -163,3 +169,38 @@ def scan(renderer, scene_a, scene_b, params, sigma_scales, budgets, mask):
                     continue
                 out["steady"][j][i] = channel_energies(r.subsurface, mask)
     return out
+
+
+def no_verdicts(name):
+    """Why a scene has no lighting-twin verdicts, with the command that measures them."""
+    return (f"no committed lighting twin of this scene; `python benchmarks/lighting_twin.py --scene {name} --write` "
+            "measures one for a homogeneous scene")
+
+
+def committed_verdicts(scene, grid, folder=None):
+    """The committed lighting-twin verdicts of ``scene`` (a :class:`~harness.scene.Scene`) at grid ``grid`` ->
+    ``{"measured": True, "page", "command", "commit", "budgets": {steps: {"possible", "of", "closest", "largest",
+    "twin_at_least"}}}``: per budget, how many of the scanned settings can put the scene and its lighting twin both
+    in the energy range (W3), the setting whose attainable ratio reaches highest (``closest``, its ``largest``
+    ratio) and the least energy ratio of the twin when the scene is in range with it (W4). Else ``{"measured":
+    False, "why"}``: no file, a file for another grid, or a scene that changed since the file was written (its
+    content hash)."""
+    path = Path(folder or VERDICTS) / f"{scene.name}.json"
+    if not path.is_file():
+        return {"measured": False, "why": no_verdicts(scene.name)}
+    data = json.loads(path.read_text())
+    if data.get("grid") != grid:
+        return {"measured": False, "why": f"the committed lighting twin is at N = {data.get('grid')}, not {grid}"}
+    if data.get("content_hash") != scene.content_hash:
+        return {"measured": False, "why": "the scene changed since its lighting twin was measured"}
+    budgets = {}
+    for steps, rows in data["budgets"].items():
+        usable = {name: r for name, r in rows.items() if r.get("usable")}
+        if not usable:
+            continue
+        closest = max(usable, key=lambda name: usable[name]["high"])
+        budgets[steps] = {"possible": sum(1 for r in usable.values() if r["possible"]), "of": len(rows),
+                          "closest": closest, "largest": usable[closest]["high"],
+                          "twin_at_least": usable[closest]["twin_at_least"]}
+    return {"measured": True, "page": data.get("page"), "command": data.get("command"), "commit": data.get("commit"),
+            "budgets": budgets}
