@@ -255,6 +255,31 @@ def test_a_changed_study_is_not_served_as_it_is(tmp_path):
 
 
 @pytest.mark.gl
+def test_a_changed_data_file_is_not_served_as_it_is(tmp_path, monkeypatch):
+    """The data files a study reads beside its renders (a scene's lighting-twin verdicts, the selection of the
+    best calibration) are part of its key: a new or changed one writes the study again."""
+    from harness.study import memo, target, twin
+    from harness.study.run import TEMPLATES
+    from harness.study.spec import load_study
+
+    study = load_study(_study(tmp_path, TINY, "a.toml"))
+    scene = study["scenes"][0]
+    monkeypatch.setattr(twin, "VERDICTS", tmp_path / "twin")
+    monkeypatch.setattr(target, "SELECTION", tmp_path / "selection.json")
+    before = memo.inputs_key(study, TEMPLATES)
+    (tmp_path / "twin").mkdir()
+    (tmp_path / "twin" / f"{scene}.json").write_text("{}")
+    added = memo.inputs_key(study, TEMPLATES)
+    (tmp_path / "twin" / f"{scene}.json").write_text('{"grid": 32}')
+    changed = memo.inputs_key(study, TEMPLATES)
+    (tmp_path / "selection.json").write_text("{}")
+    last = memo.inputs_key(study, TEMPLATES)
+    assert None not in (before, last) and len({before, added, changed, last}) == 4
+    (tmp_path / "twin" / "not_a_scene_of_the_study.json").write_text("{}")
+    assert memo.inputs_key(study, TEMPLATES) == last
+
+
+@pytest.mark.gl
 @pytest.mark.slow
 def test_headline_table_and_limits(runs):
     head, lims = runs["built"]["head"], runs["built"]["limits"]

@@ -10,12 +10,14 @@ default study on two cores). :func:`inputs_key` is the sha256 of
 * every configuration's result-cache key (:func:`harness.runs.cache.result_key`: the method's code
   and shaders, the scene, the parameters, the reference's files, this machine's GL renderer, the
   package versions), so anything that would re-render a configuration changes it;
+* the committed data files it reads beside the renders (:func:`data_hash`: the calibrations' reports and
+  floors, the selection of the best, the scenes' lighting-twin verdicts);
 * the code that measures and presents: the Python modules that :mod:`harness.study.run` and the sweep
   worker import (the metrics among them), as syntax trees without docstrings, and the page template.
 
 When the key equals the one the folder's ``study.json`` recorded, every output is there and every
 render folder it names exists, the study serves the folder as it is (nothing rendered, measured or
-written). Limits: a change outside these inputs (an environment variable, a data file read at run
+written). Limits: a change outside these inputs (an environment variable, another data file read at run
 time) is not seen; ``--no-cache`` bypasses it.
 """
 
@@ -59,8 +61,26 @@ def inputs_key(study, templates, progress=False):
                   for s in scenes for p in expand_all(study["params"]))
     resolved = {k: study[k] for k in ("scenes", "params", "size", "budget", "metrics", "significance",
                                       "calibrations", "twins", "title")}
-    doc = {"study": resolved, "configurations": keys, "code": code_hash(templates)}
+    doc = {"study": resolved, "configurations": keys, "code": code_hash(templates), "data": data_hash(study)}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def data_hash(study):
+    """sha256 over the committed data files the study reads beside its renders: each calibration's report and
+    floor (``calibration.json``, ``floor.json`` beside its file, :mod:`harness.study.limits`), the selection of
+    the best calibration (:data:`harness.study.target.SELECTION`) and each scene's lighting-twin verdicts
+    (:data:`harness.study.twin.VERDICTS`); a file that is absent counts as absent."""
+    from harness.study.target import SELECTION
+    from harness.study.twin import VERDICTS
+
+    files = [SELECTION] + [VERDICTS / f"{n}.json" for n in study["scenes"]]
+    for cal in study["calibrations"]:
+        folder = Path(cal["path"]).parent
+        files += [folder / "calibration.json", folder / "floor.json"]
+    h = hashlib.sha256()
+    for p in files:
+        h.update(str(p).encode() + b"\0" + (hashlib.sha256(p.read_bytes()).digest() if p.is_file() else b"absent"))
+    return h.hexdigest()
 
 
 def up_to_date(out, key):
