@@ -260,11 +260,7 @@ def main(argv=None):
                     "against the truth above (the mean of the per-channel ratios).")
     page.finish(args.write)
     if args.write:                                 # after the page: its header checks the tree is clean
-        write_verdicts(args, scene, results)
-
-
-#: The committed verdicts the study reads (:func:`harness.study.limits.lighting`): one file per scene.
-VERDICTS = Path(__file__).resolve().parents[1] / "baselines" / "lighting_twin"
+        write_verdicts(args, scene, results)        # harness.study.twin.VERDICTS, which the study reads
 
 
 def write_verdicts(args, scene, results):
@@ -276,6 +272,7 @@ def write_verdicts(args, scene, results):
     from page import command_line, commit_state
 
     from harness.io.atomic import atomic_write
+    from harness.scene import load_scene
     from harness.study import twin
     from harness.study.target import ENERGY_RANGE
 
@@ -291,16 +288,13 @@ def write_verdicts(args, scene, results):
             rows[name] = {"usable": True, "low": low, "high": high, "possible": v["possible"],
                           "twin_at_least": v["twin_at_least"], "unusable_points": bad}
         budgets[str(b)] = rows
-    from harness.scene import load_scene
-
     # the scene as its file declares it (the study's limits load it so), not at the reference's size
     data = {"format": "sslpv-lighting-twin", "scene": scene.name, "content_hash": load_scene(args.scene).content_hash,
             "grid": args.grid, "energy_range": list(ENERGY_RANGE), "band": list(twin.verdict(1.0, 1.0, ENERGY_RANGE)["band"]),
             "sigma_scales": list(SIGMA_SCALES), "budgets": budgets, "page": f"docs/benchmarks/{_page_name(args)}.md",
             "command": command_line(), "commit": commit + (" (with uncommitted changes)" if dirty else ""),
             "created": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-    VERDICTS.mkdir(parents=True, exist_ok=True)
-    with atomic_write(VERDICTS / f"{scene.name}.json") as tmp:
+    with atomic_write(twin.VERDICTS / f"{scene.name}.json") as tmp:      # the file the study reads
         Path(tmp).write_text(json.dumps(data, indent=1) + "\n")
 
 

@@ -148,10 +148,9 @@ def read_floor(folder):
         return None
 
 
-def floor_for(report, key):
-    """The floor of the calibration whose ``calibration.json`` is ``report`` at budget ``key`` (``"N=32 steps=32"``):
-    its own :data:`FILE`, else that of the first of its sources (a form's ``sources``) that has the budget ->
-    ``(budget entry, path of the floor file)``, or ``(None, None)``."""
+def floor_files(report):
+    """The floor files a calibration's floor may come from, in the order :func:`floor_for` looks: its own
+    :data:`FILE` beside ``report`` (its ``calibration.json``), then its sources' (a form's ``sources``)."""
     from harness import paths
 
     report = Path(report)
@@ -159,7 +158,15 @@ def floor_for(report, key):
         sources = json.loads(report.read_text()).get("sources") or []
     except (OSError, ValueError):
         sources = []
-    for folder in [report.parent, *(Path(s) if Path(s).is_absolute() else paths.REPO / s for s in sources)]:
+    return [folder / FILE for folder in
+            [report.parent, *(Path(s) if Path(s).is_absolute() else paths.REPO / s for s in sources)]]
+
+
+def floor_for(report, key):
+    """The floor of the calibration whose ``calibration.json`` is ``report`` at budget ``key`` (``"N=32 steps=32"``):
+    its own :data:`FILE`, else that of the first of its sources (a form's ``sources``) that has the budget ->
+    ``(budget entry, path of the floor file)``, or ``(None, None)``."""
+    for folder in (f.parent for f in floor_files(report)):
         floor = read_floor(folder)
         if floor and key in (floor.get("budgets") or {}):
             return floor["budgets"][key], folder / FILE

@@ -234,5 +234,6 @@ def lighting(scene, budget):
         return {"measured": False, "why": no_verdicts(scene)}
     got = committed_verdicts(load_scene(scene), budget["grid"])
     if got["measured"]:
-        got["budgets"] = {k: v for k, v in got["budgets"].items() if k in {str(b) for b in budget["steps"]}}
+        steps = {str(b) for b in budget["steps"]}
+        got["budgets"] = {k: v for k, v in got["budgets"].items() if k in steps}
     return got

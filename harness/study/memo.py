@@ -66,17 +66,19 @@ def inputs_key(study, templates, progress=False):
 
 
 def data_hash(study):
-    """sha256 over the committed data files the study reads beside its renders: each calibration's report and
-    floor (``calibration.json``, ``floor.json`` beside its file, :mod:`harness.study.limits`), the selection of
-    the best calibration (:data:`harness.study.target.SELECTION`) and each scene's lighting-twin verdicts
+    """sha256 over the committed data files the study reads beside its renders: each calibration's report
+    (``calibration.json``) and every floor file its floor may come from (its own and its sources',
+    :func:`harness.calibration.floor.floor_files`; :mod:`harness.study.limits`), the selection of the best
+    calibration (:data:`harness.study.target.SELECTION`) and each scene's lighting-twin verdicts
     (:data:`harness.study.twin.VERDICTS`); a file that is absent counts as absent."""
+    from harness.calibration.floor import floor_files
     from harness.study.target import SELECTION
     from harness.study.twin import VERDICTS
 
     files = [SELECTION] + [VERDICTS / f"{n}.json" for n in study["scenes"]]
     for cal in study["calibrations"]:
-        folder = Path(cal["path"]).parent
-        files += [folder / "calibration.json", folder / "floor.json"]
+        report = Path(cal["path"]).with_name("calibration.json")
+        files += [report, *floor_files(report)]
     h = hashlib.sha256()
     for p in files:
         h.update(str(p).encode() + b"\0" + (hashlib.sha256(p.read_bytes()).digest() if p.is_file() else b"absent"))
