@@ -134,18 +134,6 @@ def _reference(folder):
     return json.loads(done.stdout)
 
 
-def _samples(scanner, refs, budget, name, scan):
-    """The scene's scan restricted to ``scan``: a :class:`~harness.calibration.fit.SceneSamples`."""
-    from harness.calibration.fit import SceneSamples
-
-    sub = SceneSamples(name, scanner.samples[(budget, name)].refs)
-    for s in scan:
-        img = scanner.image(budget, name, s)
-        if img is not None:
-            sub.add(float(s), img[refs[name]["mask"]].ravel())
-    return sub
-
-
 def _held_out(suite, pool, X8, X9, tab8, tab9, u_grid, form):
     """Each suite scene's table relMSE with the form fitted on ``pool`` less the scene -> {scene: (relMSE, outside)}."""
     from harness.calibration.form import fold_fits_loss
@@ -171,6 +159,7 @@ def main(argv=None):
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from page import Page
 
+    from harness.calibration.floor import scan_samples
     from harness.calibration.form import scene_terms
     from harness.calibration.form_files import read_sources
     from harness.calibration.form_loss import scan_grid, scene_table, scene_table_channels
@@ -222,7 +211,7 @@ def main(argv=None):
         u_grid = scan_grid(scan, points=int(round((math.log(max(scan)) - math.log(min(scan))) / step)) + 1)
         for N, k in BUDGETS:
             b = (N, k)
-            subs = {n: _samples(scanner, refs, b, n, scan) for n in suite + train}
+            subs = {n: scan_samples(scanner.samples[(b, n)], scan) for n in suite + train}
             ok = [n for n in suite + train if len(subs[n].u) >= 3]
             tab8 = {n: scene_table(subs[n], u_grid) for n in ok}
             tab9 = {n: scene_table_channels(subs[n], u_grid) for n in ok}
