@@ -43,8 +43,9 @@ Modes
      - inside cells
      - outside cells remove what enters them (the paper's Fig. 8 future work)
    * - ``extrapolated``
-     - inside cells and outside cells within ``z_b`` of the surface
-     - the same cells
+     - inside cells, the layer of outside cells within ``z_b`` of the surface,
+       and one partial sink beyond it
+     - 1 in the same cells but the partial sink's ``f`` (Eq. (B4))
      - diffusion theory's extrapolated boundary: the fluence vanishes at
        ``z_b = 2 A(eta) D`` beyond the surface (Eq. (B3) below), with the
        Fresnel-dependent ``A(eta)`` the dipole uses
@@ -74,12 +75,24 @@ Equations (cited as "Eq. (Bn)")
 (B2) ``A(eta) = (1 + F_dr) / (1 - F_dr)`` (Jensen et al. 2001, Sec. 2.4;
      Hao & Varshney 2004, Sec. 2).
 (B3) ``z_b = 2 A D`` with ``D = 1 / (3 sigma_t')``, ``sigma_t' = sigma_a + sigma_s (1 - g)``.
+(B4) The lattice's own zero. A plain sink cell puts the zero of the lattice's
+     fluence not at its face but about at its centre, and whole cells would place
+     it only to half a cell. An outside cell whose centre lies ``t = 1/2 + z_b/dx
+     - d`` cells short of the zero (``d`` its distance to the nearest inside centre,
+     the surface lying half a cell past that centre) is a full layer cell where
+     ``t >= o(1)``, a sink where ``t < o(0)``, and between them a *partial sink*
+     that keeps the medium and passes on ``f = o^-1(t)`` of what it receives, with
+     ``o(f)`` the zero's distance beyond such a cell measured on the lattice itself
+     (:func:`sslpv_gl.bounded.partial_sink_offsets`, Eq. (D4); ``o`` runs from about
+     -0.07 to 0.93 cells).
 
 Limits
 ------
 * Distances to the surface are measured between cell centres on the grid
-  (Euclidean distance transform of the inside mask), so ``z_b`` is resolved to
-  about half a cell; below half a cell the extrapolated layer is empty and the
+  (Euclidean distance transform of the inside mask): exact for a face normal to a
+  grid axis, approximate where the surface is oblique to the grid. ``o(f)`` is the
+  ``diffusion`` lattice's (Eq. (D4)); other mappings' lattices get the same cells.
+  Below ``z_b`` of about 0.43 cells (``-o(0) + 1/2``) the layer is empty and the
   mode equals ``absorb``.
 * ``z_b`` varies with colour (``D`` does); the masks are per colour.
 """
@@ -185,8 +198,11 @@ def outside_masks(inside_mask, mode, zb_cells=None):
         return ins, ins
     if mode == "interior":                           # the pair rule is empty_mask's
         return ins, ones
-    # extrapolated: outside cells whose centre lies within z_b of the surface keep the medium.
+    # extrapolated: the medium continues past the surface and the lattice's zero of the fluence is put
+    # at z_b beyond it (Eq. (B4)): full layer cells, one partial sink, then sinks.
     from scipy.ndimage import distance_transform_edt
+
+    from .bounded import partial_sink_offsets
 
     if zb_cells is None:
         raise ValueError("outside mode 'extrapolated' needs zb_cells")
@@ -197,10 +213,15 @@ def outside_masks(inside_mask, mode, zb_cells=None):
     zb = np.asarray(zb_cells, dtype=np.float64)
     if zb.ndim == 4:
         zb = zb[idx[0], idx[1], idx[2]]              # the nearest inside cell's z_b
-    # the surface lies about half way between an inside and an outside centre
-    layer = (dist[..., None] - 0.5) <= zb
-    keep = np.where(inside[..., None], True, layer).astype(np.float64)
-    return keep, keep
+    # the surface lies about half way between an inside and an outside centre; t: how far the
+    # zero should lie beyond this cell's centre
+    t = 0.5 + zb - dist[..., None]
+    f_tab, o_tab = partial_sink_offsets()
+    full = inside[..., None] | (t >= o_tab[-1])
+    part = ~full & (t >= o_tab[0])
+    keep = (full | part).astype(np.float64)
+    emit = np.where(full, 1.0, np.where(part, np.interp(t, o_tab, f_tab), 0.0))
+    return keep, emit
 
 
 def empty_mask(inside_mask, mode):

@@ -36,10 +36,24 @@ Equations (cited as "Eq. (Dn)")
      (``j = i + o_s``, ``A`` the two-half attenuation, ``e`` emit, ``S = diag(1, k1, k1, k1)``).
      :func:`slab_operator` builds it; ``tests/test_diffusion_bounded.py`` checks it
      against :func:`sslpv_gl.twin.propagate` on a 3D grid.
+(D4) Where a sink puts the zero of the lattice's fluence. A half-infinite chain
+     (Eq. (D3)) of the ``diffusion`` lattice ends in a *partial sink*: a cell that holds
+     the medium and passes on ``emit = f`` of what it receives, with sinks beyond it.
+     Between that end and a plane source deep inside, the lattice's fluence is
+     ``A sinh(k (z - z0))`` (``k`` its decay per cell, measured on the chain); ``z0``
+     solves ``phi(z1) / phi(z2) = sinh(k (z1 - z0)) / sinh(k (z2 - z0))`` for two cells
+     ``z1 < z2`` past the end's transients. :func:`partial_sink_offsets` tabulates the
+     zero's distance beyond the partial cell's centre, ``o(f)``: about ``-0.07`` cells
+     at ``f = 0`` (a plain sink: the zero lies just inside its centre) to ``+0.93`` at
+     ``f = 1`` (the cell is medium; the zero moves one cell out), independent of the
+     medium to 0.01 cells for ``sigma_tr dx`` from 0.05 to 0.35 (the test). The
+     ``extrapolated`` layer (:func:`sslpv_gl.boundary.outside_masks`) inverts it to
+     put the zero at ``z_b`` to a fraction of a cell.
 
 The lattice's fluxes are read from its sinks: a sink cell keeps what enters it and
 passes nothing on, so its accumulated ``c00`` (from step 1, ``skip = 0``) is the
-total flux that crossed into it, in the same ``c00`` units as the source.
+total flux that crossed into it, in the same ``c00`` units as the source. A partial
+sink (Eq. (D4)) removes ``1 - emit`` of what it receives.
 
 Limits
 ------
@@ -51,6 +65,8 @@ Limits
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -58,7 +74,8 @@ import scipy.sparse.linalg as spla
 from . import boundary, diffusion
 from .sh import SOURCE_OFFSETS, clamped_cosine_coeffs, hemisphere_radiance, propagation_matrices, scatter_factors
 
-__all__ = ["slab_diffusion", "sphere_diffusion", "sphere_side_diffusion", "slab_operator", "slab_lattice", "sphere_lattice"]
+__all__ = ["slab_diffusion", "sphere_diffusion", "sphere_side_diffusion", "slab_operator", "slab_lattice", "sphere_lattice",
+           "partial_sink_offsets", "chain_zero"]
 
 
 def _coefficients(sigma_t, albedo, g):
@@ -139,6 +156,50 @@ def _steady(P, P1, c0):
     return spla.spsolve((sp.identity(n, format="csc") - P).tocsc(), P1 @ c0)
 
 
+def chain_zero(emit_end, kappa=0.1, medium_end=True, cells=160):
+    """Eq. (D4): the zero of the lattice's fluence beyond a chain's end cell, in cells from its centre.
+
+    The chain (Eq. (D3)) holds the ``diffusion`` lattice of a medium with ``sigma_tr dx =
+    kappa`` (``sigma_t' dx = 1``); cell 20 is the end (medium when ``medium_end``, else
+    vacuum) passing on ``emit_end`` of what it receives, cells below it are sinks, and a
+    plane ``c00`` source sits 100 cells further in. Positive: the zero lies outside the
+    end cell's centre.
+    """
+    from scipy.optimize import brentq
+
+    b, src, n = 20, 120, int(cells)
+    m = diffusion.diffusion_mapping(1.0, 1.0 - kappa * kappa / 3.0, 0.0, 1.0)
+    keep = np.zeros(n)
+    keep[b + 1:] = 1.0
+    keep[b] = 1.0 if medium_end else 0.0
+    emit = np.ones(n)
+    emit[:b] = 0.0
+    emit[b] = float(emit_end)
+    sig = np.where(keep > 0, float(m["sigma_lpv"]), 0.0)
+    k1 = scatter_factors(keep, float(m["g"]))[..., 1]
+    c0 = np.zeros(4 * n)
+    c0[4 * src] = 1.0
+    phi = _steady(slab_operator(sig, k1, emit, 1.0), slab_operator(sig, k1, np.ones(n), 1.0), c0).reshape(n, 4)[:, 0]
+    k = float(np.log(phi[b + 80] / phi[b + 79]))       # the decay per cell, far from both ends
+    z1, z2 = b + 6, b + 6 + max(int(np.ceil(0.7 / k)), 4)
+    ratio = phi[z1] / phi[z2]
+    z0 = brentq(lambda z: np.sinh(k * (z1 - z)) / np.sinh(k * (z2 - z)) - ratio, b - 10.0, z1 - 1e-6)
+    return float(b - z0)
+
+
+@functools.lru_cache(maxsize=1)
+def partial_sink_offsets(points=41):
+    """Eq. (D4) tabulated -> ``(emit, offset)``, two increasing float64 arrays of ``points`` values.
+
+    ``offset`` is :func:`chain_zero` of a medium end cell at each ``emit`` (denser near 1,
+    where it changes fastest), at ``sigma_tr dx = 0.1``.
+    """
+    u = np.linspace(0.0, 1.0, int(points))
+    f = 1.0 - (1.0 - u) ** 2
+    off = np.array([chain_zero(e) for e in f])
+    return f, off
+
+
 def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=False, outside="extrapolated",
                  lobe_depth_mfp=None):
     """The ``diffusion`` lattice's slab of ``N`` cells -> dict of lattice and diffusion R, T.
@@ -185,8 +246,8 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
         c0[4 * i0] = 1.0
         z0 = (i0 - pad + 0.5) * dx
     acc = _steady(P, P1, c0).reshape(n, 4)
-    sinks = emit == 0
-    left, right = sinks & (np.arange(n) < pad), sinks & (np.arange(n) >= pad + int(N))
+    removed = acc[:, 0] * (1.0 - emit)             # what the sinks and partial sinks kept (Eq. (D4))
+    left, right = np.arange(n) < pad, np.arange(n) >= pad + int(N)
     R_d, T_d = slab_diffusion(sigma_t, albedo, g, d, z0, zb)
     power = np.sqrt(4.0 * np.pi) * c0[4 * i0]        # per cell (P = sqrt(4 pi) c00)
     n_out = np.array([1.0, 0.0, 0.0])
@@ -195,7 +256,7 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
         scale = float(m["radiance_scale"]) if keep[i] > 0 else sink_scale
         return float(np.pi * scale * hemisphere_radiance(acc[i], n_out, dx * dx) * dx * dx / power)
 
-    return {"R": acc[left, 0].sum() / c0[4 * i0], "T": acc[right, 0].sum() / c0[4 * i0],
+    return {"R": removed[left].sum() / c0[4 * i0], "T": removed[right].sum() / c0[4 * i0],
             "R_diff": R_d, "T_diff": T_d, "z0": z0, "zb": zb, "dx": dx, "kappa": float(m["kappa"]),
             "T_render_in": read(pad + int(N) - 1), "T_render_out": read(pad + int(N)),
             "T_render_out_R": read(pad + int(N), float(m["radiance_scale"])), "accum": acc, "pad": pad}
@@ -245,14 +306,13 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
     for col, med in enumerate(media):
         esc_d, phi_d = sphere_diffusion(*med, a, float(zb[col]), r[sel])
         phi = m["fluence_scale"][col] * acc[..., col, 0][sel]     # Eq. (18); P = sqrt(4 pi) c00 = sqrt(4 pi)
-        sink = emit[..., col] == 0
-        row = {"escape": float(acc[..., col, 0][sink].sum()), "escape_diff": esc_d,
+        removed = acc[..., col, 0] * (1.0 - emit[..., col])   # sinks and partial sinks (Eq. (D4))
+        row = {"escape": float(removed.sum()), "escape_diff": esc_d,
                "ratio": phi / (np.sqrt(4 * np.pi) * phi_d), "r_cells": r[sel] / dx,
                "kappa": float(m["kappa"][col]), "zb": float(zb[col])}
         if depth_mfp is not None:
             weight = np.where(idx < 0, 1.0, np.where(idx == 0, 0.5, 0.0))[None, None, :]   # x < 0, half of x = 0
-            row["escape"] = float(acc[..., col, 0][sink].sum())
-            row["escape_far"] = float((acc[..., col, 0] * weight)[sink].sum())
+            row["escape_far"] = float((removed * weight).sum())
             row["escape_diff"], row["escape_far_diff"] = sphere_side_diffusion(*med, a, float(zb[col]),
                                                                                shift[col] * dx)
             row["ratio"] = None                      # Eq. (D2)'s fluence is for the centred source

@@ -69,18 +69,35 @@ class TestMasks:
 
     def test_extrapolated_layer(self):
         inside = sphere_mask()
-        thin, _ = boundary.outside_masks(inside, "extrapolated", np.full(3, 0.2))
+        thin, thin_emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 0.2))
         absorb, _ = boundary.outside_masks(inside, "absorb")
-        assert np.array_equal(thin, absorb)          # z_b below half a cell: no layer
+        assert np.array_equal(thin, absorb) and np.array_equal(thin_emit, absorb)   # z_b under 0.43 cells: no layer
         one, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 1.0))
         two, _ = boundary.outside_masks(inside, "extrapolated", np.full(3, 2.0))
-        assert np.array_equal(one, emit)
         assert absorb.sum() < one.sum() < two.sum()
-        # every added cell is an outside cell next to the surface (within z_b + 1/2 cells of an inside centre)
+        # every added cell is an outside cell next to the surface: within z_b + 1/2 + o(0) cells of an inside centre
         from scipy.ndimage import distance_transform_edt
         dist = distance_transform_edt(~inside)
         added = (one[..., 0] > 0) & ~inside
-        assert added.any() and dist[added].max() <= 1.5
+        assert added.any() and dist[added].max() <= 1.5 + 0.075
+        # the medium's cells pass on all they receive but the partial sinks (Eq. (B4)), which pass on a fraction
+        partial = (emit > 0) & (emit < 1)
+        assert partial.any() and np.all(one[partial] == 1) and np.all(emit[one == 0] == 0)
+        assert np.all(emit[(one == 1) & ~partial] == 1)
+
+    def test_partial_sink_places_the_zero(self):
+        """Eq. (B4) on a laterally uniform slab: the lattice's zero lies ``z_b`` past the surface (Eq. (D4))."""
+        from sslpv_gl import bounded
+        f_tab, o_tab = bounded.partial_sink_offsets()
+        for zb in (0.6, 1.07, 1.94, 2.5):
+            inside = np.zeros((1, 1, 12), dtype=bool)
+            inside[..., 8:] = True                   # surface at x = 7.5 (cells), outside towards x = 0
+            _, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, zb))
+            e = emit[0, 0, :, 0]
+            p = int(np.flatnonzero((e > 0) & (e < 1))[0])
+            # the partial cell's own zero, o(f), beyond its centre: at the surface plus z_b
+            assert p - float(np.interp(e[p], f_tab, o_tab)) == pytest.approx(7.5 - zb, abs=1e-9)
+            assert np.all(e[:p] == 0) and np.all(e[p + 1:] == 1)
 
     def test_per_colour(self):
         inside = sphere_mask()
