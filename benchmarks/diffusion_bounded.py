@@ -72,15 +72,15 @@ def sphere_rows(N):
     print(f"    (N = {N}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
 
 
-def side_rows(N):
+def side_rows(N, pole):
     t = time.perf_counter()
-    out, info = bounded.sphere_lattice(SPHERES, N, depth_mfp=1.0)
+    out, info = bounded.sphere_lattice(SPHERES, N, depth_mfp=1.0, pole=pole)
     for med, o in zip(SPHERES, out):
         name = f"({med[0]:.2f}, {med[1]}, {med[2]})"
-        print(f"{name:>24} {N:>3} {o['kappa']:6.3f} {o['zb'] * N / 2:6.2f} {o['escape']:7.4f} {o['escape_diff']:7.4f} "
+        print(f"{name:>24} {pole:>6} {N:>3} {o['kappa']:6.3f} {o['zb'] * N / 2:6.2f} {o['escape']:7.4f} {o['escape_diff']:7.4f} "
               f"{o['escape'] / o['escape_diff']:6.3f} {o['escape_far']:7.4f} {o['escape_far_diff']:7.4f} "
               f"{o['escape_far'] / o['escape_far_diff']:6.3f}")
-    print(f"    (N = {N}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
+    print(f"    (N = {N}, pole on a {pole}: {time.perf_counter() - t:.0f} s, Krylov iterations {info['iterations']})")
 
 
 def main(argv=None):
@@ -98,12 +98,14 @@ def main(argv=None):
     if args.sphere64:
         sphere_rows(64)
     print("\nsphere lit from one side: point source one reduced mean free path below the +x pole (Eq. (D2')); "
-          "far = flux through the far hemisphere (x < 0)")
-    print(f"{'medium (st, a, g)':>24} {'N':>3} {'kappa':>6} {'zb/dx':>6} {'esc lat':>7} {'esc dif':>7} "
+          "far = flux through the far hemisphere. pole: where the grid puts the pole, on a cell face (an even grid, "
+          "as renders have) or on the centre of the first outside cell (an odd grid: a mask of cell centres puts "
+          "that pole's surface half a cell inside the sphere)")
+    print(f"{'medium (st, a, g)':>24} {'pole':>6} {'N':>3} {'kappa':>6} {'zb/dx':>6} {'esc lat':>7} {'esc dif':>7} "
           f"{'ratio':>6} {'far lat':>7} {'far dif':>7} {'ratio':>6}")
-    side_rows(32)
-    if args.sphere64:
-        side_rows(64)
+    for N in (32, 64) if args.sphere64 else (32,):
+        for pole in ("face", "centre"):
+            side_rows(N, pole)
 
 
 if __name__ == "__main__":

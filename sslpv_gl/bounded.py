@@ -262,19 +262,26 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
             "T_render_out_R": read(pad + int(N), float(m["radiance_scale"])), "accum": acc, "pad": pad}
 
 
-def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
+def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None, pole="face"):
     """A sphere ``N`` cells across with a ``c00`` point source in its centre cell -> dict.
 
     ``media``: three ``(sigma_t, albedo, g)``, one per colour, in units of the sphere's
     radius ``a = 1`` (``dx = 2 / N``). ``depth_mfp``: the source sits instead in the cell
-    on the +x axis nearest ``depth_mfp / sigma_t'`` below the surface (per colour), and
+    next to the +x axis nearest ``depth_mfp / sigma_t'`` below the surface (per colour), and
     the result also holds ``escape_far`` / ``escape_far_diff`` (Eq. (D2'), ``r0`` that
-    cell's centre; the lattice's sinks with ``x < 0``, half of those with ``x = 0``). The grid is odd-sized so that the centre is a
-    cell centre, padded by the ``extrapolated`` layer and sinks; the steady state is
+    cell's centre, the series' axis through it; the far hemisphere is the sinks on the
+    other side of the plane through the centre normal to that axis, half of those on it).
+    The centred source needs an odd-sized grid, whose centre is a cell centre; its
+    poles then lie ON the centres of the first outside cells, half a cell beyond where a
+    mask of cell centres can put a surface (averaged over the sphere the two agree). For
+    the source below a pole, ``pole="face"`` (the default) uses an even-sized grid, as
+    renders do (the grid's corners on the bounding box), whose poles lie on cell faces;
+    ``pole="centre"`` keeps the odd grid and the source on the axis. Grids are padded by
+    the ``extrapolated`` layer and sinks; the steady state is
     :func:`sslpv_gl.steady.steady_state` with ``skip = 0``. Returns per colour
-    ``escape`` (flux into the sinks over the source), ``escape_diff`` (Eq. (D2)), the
-    fluence ratio ``phi_lattice / phi_diff`` at every inside cell with
-    ``3 <= r/dx <= (a/dx) - 3`` (``ratio``, ``r_cells``), ``kappa`` and ``zb``.
+    ``escape`` (flux removed by the sinks and partial sinks over the source),
+    ``escape_diff`` (Eq. (D2)), the fluence ratio ``phi_lattice / phi_diff`` at every
+    inside cell with ``3 <= r/dx <= (a/dx) - 3`` (``ratio``, ``r_cells``), ``kappa`` and ``zb``.
     """
     from .steady import steady_state
 
@@ -285,8 +292,11 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
     zb = boundary.extrapolation_distance(st, al, gg, 1.0)
     pad = int(np.ceil(zb.max() / dx)) + 3
     half = int(N) // 2 + pad
-    n = 2 * half + 1
-    idx = np.arange(n) - half
+    even = depth_mfp is not None and pole == "face"
+    if pole not in ("face", "centre"):
+        raise ValueError(f"pole must be 'face' or 'centre', not {pole!r}")
+    n = 2 * half if even else 2 * half + 1
+    idx = np.arange(n) - half + (0.5 if even else 0.0)     # cell centres, in cells from the sphere's centre
     r = np.sqrt(idx[:, None, None] ** 2 + idx[None, :, None] ** 2 + idx[None, None, :] ** 2) * dx
     inside = r < a
     keep, emit = boundary.outside_masks(inside, "extrapolated", zb / dx)
@@ -294,27 +304,31 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None):
     sig = np.where(keep > 0, m["sigma_lpv"], 0.0)
     spr = np.where(keep > 0, 1.0, 0.0)
     c0 = np.zeros((n, n, n, 3, 4))
-    shift = np.zeros(3, dtype=int)
+    src = [(half, half, half)] * 3                   # [z, y, x]
     if depth_mfp is not None:
         sigma_tp = np.array([_coefficients(*med)[1] for med in media])
-        shift = np.round((a - depth_mfp / sigma_tp) / dx).astype(int)
+        x = a - depth_mfp / sigma_tp                 # the source's distance from the centre, along +x
+        src = [(half, half, int(np.argmin(np.abs(idx * dx - xc)))) for xc in x]
     for col in range(3):
-        c0[half, half, half + shift[col], col, 0] = 1.0   # [z, y, x]: along +x
+        c0[src[col] + (col, 0)] = 1.0
     acc, info = steady_state(c0, sig, spr, m["g"], dx, skip=0, emit=emit, rtol=rtol, check_spectrum=False)
     out = []
     sel = inside & (r >= 3 * dx - 1e-9) & (r <= a - 3 * dx + 1e-9)
     for col, med in enumerate(media):
-        esc_d, phi_d = sphere_diffusion(*med, a, float(zb[col]), r[sel])
-        phi = m["fluence_scale"][col] * acc[..., col, 0][sel]     # Eq. (18); P = sqrt(4 pi) c00 = sqrt(4 pi)
         removed = acc[..., col, 0] * (1.0 - emit[..., col])   # sinks and partial sinks (Eq. (D4))
-        row = {"escape": float(removed.sum()), "escape_diff": esc_d,
-               "ratio": phi / (np.sqrt(4 * np.pi) * phi_d), "r_cells": r[sel] / dx,
-               "kappa": float(m["kappa"][col]), "zb": float(zb[col])}
-        if depth_mfp is not None:
-            weight = np.where(idx < 0, 1.0, np.where(idx == 0, 0.5, 0.0))[None, None, :]   # x < 0, half of x = 0
+        row = {"escape": float(removed.sum()), "kappa": float(m["kappa"][col]), "zb": float(zb[col])}
+        if depth_mfp is None:
+            esc_d, phi_d = sphere_diffusion(*med, a, float(zb[col]), r[sel])
+            phi = m["fluence_scale"][col] * acc[..., col, 0][sel]     # Eq. (18); P = sqrt(4 pi) c00 = sqrt(4 pi)
+            row |= {"escape_diff": esc_d, "ratio": phi / (np.sqrt(4 * np.pi) * phi_d), "r_cells": r[sel] / dx}
+        else:
+            p = idx[list(src[col])] * dx             # the source cell's centre [z, y, x]
+            r0 = float(np.linalg.norm(p))
+            along = (idx[:, None, None] * p[0] + idx[None, :, None] * p[1] + idx[None, None, :] * p[2]) * dx
+            weight = np.where(along < -1e-12, 1.0, np.where(along <= 1e-12, 0.5, 0.0))
             row["escape_far"] = float((removed * weight).sum())
-            row["escape_diff"], row["escape_far_diff"] = sphere_side_diffusion(*med, a, float(zb[col]),
-                                                                               shift[col] * dx)
+            row["escape_diff"], row["escape_far_diff"] = sphere_side_diffusion(*med, a, float(zb[col]), r0)
             row["ratio"] = None                      # Eq. (D2)'s fluence is for the centred source
+            row["r0"] = r0
         out.append(row)
     return out, info
