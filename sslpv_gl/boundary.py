@@ -175,13 +175,15 @@ def extrapolation_distance(sigma_t, albedo, g, eta):
     return 2.0 * a_of_eta(eta) * D
 
 
-def outside_masks(inside_mask, mode, zb_cells=None):
+def outside_masks(inside_mask, mode, zb_cells=None, offsets=None):
     """``(material, emit)`` masks of one outside mode -> two float64 ``(N, N, N, C)`` arrays.
 
     ``inside_mask`` is ``(N, N, N)`` bool ``[z, y, x]`` (cell centre inside the
     mesh) or None (every cell inside). ``zb_cells`` is ``z_b / dx``, shape
     ``(C,)`` or ``(N, N, N, C)`` (needed for ``extrapolated`` only; its value in
-    the nearest inside cell is used). ``C`` is 3 (colours).
+    the nearest inside cell is used). ``C`` is 3 (colours). ``offsets``: the lattice's
+    ``(emit, o(emit))`` table of Eq. (B4), :func:`sslpv_gl.bounded.partial_sink_offsets`
+    (needed for ``extrapolated`` only; passed in so that this module needs no lattice).
     """
     if mode not in OUTSIDE_MODES:
         raise ValueError(f"unknown outside mode {mode!r}; use one of {', '.join(OUTSIDE_MODES)}")
@@ -202,10 +204,8 @@ def outside_masks(inside_mask, mode, zb_cells=None):
     # at z_b beyond it (Eq. (B4)): full layer cells, one partial sink, then sinks.
     from scipy.ndimage import distance_transform_edt
 
-    from .bounded import partial_sink_offsets
-
-    if zb_cells is None:
-        raise ValueError("outside mode 'extrapolated' needs zb_cells")
+    if zb_cells is None or offsets is None:
+        raise ValueError("outside mode 'extrapolated' needs zb_cells and offsets (sslpv_gl.bounded.partial_sink_offsets())")
     if not inside.any():
         return ins, ins
     # distance (cells) from each outside centre to the nearest inside centre, and that centre's index
@@ -216,7 +216,7 @@ def outside_masks(inside_mask, mode, zb_cells=None):
     # the surface lies about half way between an inside and an outside centre; t: how far the
     # zero should lie beyond this cell's centre
     t = 0.5 + zb - dist[..., None]
-    f_tab, o_tab = partial_sink_offsets()
+    f_tab, o_tab = (np.asarray(v, dtype=np.float64) for v in offsets)
     full = inside[..., None] | (t >= o_tab[-1])
     part = ~full & (t >= o_tab[0])
     keep = (full | part).astype(np.float64)

@@ -227,7 +227,7 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     n = int(N) + 2 * pad
     inside = np.zeros((1, 1, n), dtype=bool)
     inside[..., pad:pad + int(N)] = True
-    keep, emit = boundary.outside_masks(inside, outside, np.full(3, zb / dx))
+    keep, emit = boundary.outside_masks(inside, outside, np.full(3, zb / dx), partial_sink_offsets())
     keep, emit = keep[0, 0, :, 0], emit[0, 0, :, 0]
     m = diffusion.diffusion_mapping(sigma_t, albedo, g, dx)
     sig = np.where(keep > 0, float(m["sigma_lpv"]), 0.0)
@@ -299,7 +299,7 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None, pole="face"):
     idx = np.arange(n) - half + (0.5 if even else 0.0)     # cell centres, in cells from the sphere's centre
     r = np.sqrt(idx[:, None, None] ** 2 + idx[None, :, None] ** 2 + idx[None, None, :] ** 2) * dx
     inside = r < a
-    keep, emit = boundary.outside_masks(inside, "extrapolated", zb / dx)
+    keep, emit = boundary.outside_masks(inside, "extrapolated", zb / dx, partial_sink_offsets())
     m = diffusion.diffusion_mapping(st, al, gg, dx)
     sig = np.where(keep > 0, m["sigma_lpv"], 0.0)
     spr = np.where(keep > 0, 1.0, 0.0)

@@ -19,11 +19,17 @@ from .calibrated import load_calibrated, parse_mapping
 from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS, check_transport_outside
 from .reflect import BOUNDARY_REFLECTS, check
 
-__all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES"]
+__all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES", "PAPER_SETTINGS",
+           "EXTENSION_MAPPINGS"]
 
 LOOKUPS = ("cell", "trilinear")
 PRECISIONS = ("fp32", "fp16")
 OUTSIDE = OUTSIDE_MODES
+#: The settings whose other values are extensions (options the paper does not have), with the paper's value of each.
+PAPER_SETTINGS = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
+                  "inject_offset": 0.0}
+#: Mappings that are themselves extensions, and the published mapping each is judged against.
+EXTENSION_MAPPINGS = {"transport": "collision"}
 #: ``steps`` values other than a count: propagate to convergence, or solve the steady state.
 STEP_MODES = ("auto", "steady")
 

@@ -4,9 +4,11 @@ and the twin's sink cells."""
 import numpy as np
 import pytest
 
-from sslpv_gl import boundary, twin
+from sslpv_gl import boundary, bounded, twin
 from sslpv_gl.optics import fresnel_reflectance
 from sslpv_gl.sh import clamped_cosine_coeffs
+
+OFFSETS = bounded.partial_sink_offsets()
 
 
 def external_route_fdr(eta, order=400):
@@ -69,11 +71,11 @@ class TestMasks:
 
     def test_extrapolated_layer(self):
         inside = sphere_mask()
-        thin, thin_emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 0.2))
+        thin, thin_emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 0.2), OFFSETS)
         absorb, _ = boundary.outside_masks(inside, "absorb")
         assert np.array_equal(thin, absorb) and np.array_equal(thin_emit, absorb)   # z_b under 0.43 cells: no layer
-        one, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 1.0))
-        two, _ = boundary.outside_masks(inside, "extrapolated", np.full(3, 2.0))
+        one, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, 1.0), OFFSETS)
+        two, _ = boundary.outside_masks(inside, "extrapolated", np.full(3, 2.0), OFFSETS)
         assert absorb.sum() < one.sum() < two.sum()
         # every added cell is an outside cell next to the surface: within z_b + 1/2 + o(0) cells of an inside centre
         from scipy.ndimage import distance_transform_edt
@@ -87,12 +89,11 @@ class TestMasks:
 
     def test_partial_sink_places_the_zero(self):
         """Eq. (B4) on a laterally uniform slab: the lattice's zero lies ``z_b`` past the surface (Eq. (D4))."""
-        from sslpv_gl import bounded
-        f_tab, o_tab = bounded.partial_sink_offsets()
+        f_tab, o_tab = OFFSETS
         for zb in (0.6, 1.07, 1.94, 2.5):
             inside = np.zeros((1, 1, 12), dtype=bool)
             inside[..., 8:] = True                   # surface at x = 7.5 (cells), outside towards x = 0
-            _, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, zb))
+            _, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, zb), OFFSETS)
             e = emit[0, 0, :, 0]
             p = int(np.flatnonzero((e > 0) & (e < 1))[0])
             # the partial cell's own zero, o(f), beyond its centre: at the surface plus z_b
@@ -101,7 +102,7 @@ class TestMasks:
 
     def test_per_colour(self):
         inside = sphere_mask()
-        mat, _ = boundary.outside_masks(inside, "extrapolated", np.array([0.2, 1.0, 2.0]))
+        mat, _ = boundary.outside_masks(inside, "extrapolated", np.array([0.2, 1.0, 2.0]), OFFSETS)
         counts = mat.reshape(-1, 3).sum(0)
         assert counts[0] < counts[1] < counts[2]
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from harness.scene import load_scene
-from sslpv_gl import boundary, steady, twin
+from sslpv_gl import boundary, bounded, steady, twin
 from sslpv_gl.params import SSLPVParams
 
 pytestmark = pytest.mark.gl
@@ -50,7 +50,9 @@ class TestSinks:
         c = (np.arange(N) + 0.5) / N - 0.5
         z, y, x = np.meshgrid(c, c, c, indexing="ij")
         inside = x**2 + y**2 + z**2 < 0.35**2
-        _, emit = boundary.outside_masks(inside, mode, np.array([0.6, 1.2, 2.0]))
+        _, emit = boundary.outside_masks(inside, mode, np.array([0.6, 1.2, 2.0]), bounded.partial_sink_offsets())
+        if mode == "extrapolated":                   # partial sinks (Eq. (B4)): fractional emit through the GL path
+            assert ((emit > 0) & (emit < 1)).any()
         mat = {"sigma_lpv": rng.uniform(0, 5, (N, N, N, 3)).astype(np.float32),
                "sigma_s_prime": rng.uniform(0, 1, (N, N, N, 3)).astype(np.float32),
                "g": rng.uniform(-0.5, 0.9, (N, N, N, 3)).astype(np.float32),

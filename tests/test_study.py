@@ -374,6 +374,11 @@ def test_docs_page_from_the_study(runs, tmp_path):
         assert f"figures/results_{name}.png" in text
     assert str(doc) in written
     assert "## The extensions beside the published method" in text and "\n| collision + interior | collision |" in text
+    # the extensions' outside treatment, committed beside this page (not into the repository's baselines)
+    choice = tmp_path / "docs" / "outside.json"
+    assert str(choice) in written
+    assert json.loads(choice.read_text())["outside"] == runs["built"]["extensions"]["default_outside"]["outside"]
+    assert "That choice is committed to" in text
     # the calibration target: this study does not render the committed best calibration, and says so
     assert "## The calibration target" in text and "The calibration target is not judged:" in text
     assert "<h2>The calibration target</h2>" in (runs["out"] / "index.html").read_text()

@@ -47,8 +47,12 @@ class SSLPVMethod(Method):
 
     def make_params(self, **fields):
         """Validated parameters from the settings given; a calibrated mapping brings the settings it was fitted
-        with for the ones not given (:meth:`sslpv_gl.params.SSLPVParams.given`)."""
-        return self.params_type.given(**fields)
+        with for the ones not given (:meth:`sslpv_gl.params.SSLPVParams.given`), and a configuration that turns
+        on an extension without an ``outside`` gets the extensions' committed treatment
+        (:mod:`harness.methods.extension_outside`)."""
+        from .extension_outside import with_extension_outside
+
+        return self.params_type.given(**with_extension_outside(fields, self.params_type))
 
     def label(self, params):
         """``N32-K16-collision``: the paper's three axes, then any non-default setting (as before methods)."""

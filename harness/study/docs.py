@@ -16,6 +16,7 @@ from pathlib import Path
 
 from harness import paths
 from harness.io.atomic import atomic_write
+from harness.methods.extension_outside import CHOICE, write_choice
 from harness.study.present import (extension_lines, extension_rows, headline_rows, judging_methods, limit_lines,
                                    target_table)
 
@@ -30,9 +31,12 @@ def _md_cell(c):
     return f"{c['vals']} {mark}<br>`{c['setting']}`<br>{c['cost']}"
 
 
-def write_docs(built, out, doc=DOC):
-    """Write ``doc`` and copy the plots next to it (``docs/figures/results_<name>.svg|png``); returns the paths."""
+def write_docs(built, out, doc=DOC, choice=None):
+    """Write ``doc`` and copy the plots next to it (``docs/figures/results_<name>.svg|png``), and commit the
+    extensions' outside treatment the study chose to ``choice`` (:data:`harness.methods.extension_outside.CHOICE`
+    beside the default ``doc``, ``outside.json`` beside another); returns the paths."""
     info, head = built["info"], built["head"]
+    choice = (CHOICE if Path(doc) == DOC else Path(doc).parent / "outside.json") if choice is None else choice
     metrics = info["metrics"]
     figdir = Path(doc).parent / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
@@ -105,6 +109,16 @@ def write_docs(built, out, doc=DOC):
             lines.append(f"| {r['family']} | {r['base']} | {r['median']} | {r['counts']} | "
                          + " | ".join(r["cells"]) + " |")
         lines += [""] + [f"{x}" for x in extension_lines(ext)] + [""]
+        from datetime import datetime, timezone
+
+        committed = write_choice(ext.get("default_outside"), info | {"created": datetime.now(timezone.utc).isoformat()},
+                                 choice)
+        if committed is not None:
+            written.append(committed)
+            shown = Path(committed).relative_to(paths.REPO) if Path(committed).is_relative_to(paths.REPO) else committed
+            lines += [f"That choice is committed to `{shown}`: a render that turns on an extension and gives no "
+                      "`--outside` uses it, or the next treatment of that file it accepts that beat the paper's "
+                      "(`harness/methods/extension_outside.py`).", ""]
     lines += ["## Figures", ""]
     for name in plots:
         lines += [f"![{name}](figures/results_{name}.png) ([SVG](figures/results_{name}.svg))", ""]

@@ -37,16 +37,16 @@ the base's metric is 0 has no ratio.
 import statistics
 
 from harness.study.headline import best_cells, judge_cells
+from sslpv_gl.params import EXTENSION_MAPPINGS, PAPER_SETTINGS
 
 #: Each extension's parameter and the paper's value of it.
-PAPER = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
-         "inject_offset": 0.0}
+PAPER = PAPER_SETTINGS
 #: How a non-paper value is named in a family (the value itself where absent).
 NAMES = {"boundary_reflect": {"rdr": "R_dr"}, "phase_scaling": {"delta-eddington": "δ-Eddington"},
          "eta2": {True: "η²"}}
 SEPARATOR = " + "
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
-MAPPING_BASE = {"transport": "collision"}
+MAPPING_BASE = EXTENSION_MAPPINGS
 
 
 def extension_tags(params):

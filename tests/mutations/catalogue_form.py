@@ -200,7 +200,8 @@ FORM = (
              ("tests/test_study.py::test_a_changed_data_file_is_not_served_as_it_is",),
              "a warm study served as it was after a lighting-twin verdict or the best's selection changed"),
     Mutation("calibrated_settings_not_the_files", "mapping", "harness/methods/sslpv.py",
-             "return self.params_type.given(**fields)", "return self.params_type(**fields)",
+             "return self.params_type.given(**with_extension_outside(fields, self.params_type))",
+             "return self.params_type(**with_extension_outside(fields, self.params_type))",
              ("tests/test_calibrated.py::TestTheFilesSettings::test_a_setting_not_given_is_the_files",
               "tests/test_calibrated.py::TestTheFilesSettings::test_a_sweep_product_gives_each_mapping_its_own"),
              "--mapping calibrated:PATH alone renders with the default settings, not the file's (a calibration "
@@ -210,4 +211,13 @@ FORM = (
              "fields = {**fields, **{k: cal.settings[k] for k in SETTINGS}}",
              ("tests/test_calibrated.py::TestTheFilesSettings::test_a_setting_given_with_another_value_is_refused",),
              "a setting given explicitly is silently replaced by the calibrated file's, instead of refused"),
+    Mutation("extension_outside_for_the_published_method", "mapping", "harness/methods/extension_outside.py",
+             "parse_mapping(fields.get(\"mapping\")) is not None or not _turns_on_an_extension(fields):",
+             "parse_mapping(fields.get(\"mapping\")) is not None:",
+             ("tests/test_extension_outside.py::TestWhichConfigurations::test_the_published_method_keeps_the_papers",),
+             "the extensions' outside treatment given to a configuration without an extension (the paper's vacuum lost)"),
+    Mutation("extension_outside_over_a_refusal", "mapping", "harness/methods/extension_outside.py",
+             "            params_type(**{**fields, \"outside\": mode})\n", "            pass\n",
+             ("tests/test_extension_outside.py::TestARefusedChoice",),
+             "the extensions' committed outside treatment given where the configuration refuses it (rdr, transport)"),
 )
