@@ -84,16 +84,21 @@ Equations (cited as "Eq. (Bn)")
      that keeps the medium and passes on ``f = o^-1(t)`` of what it receives, with
      ``o(f)`` the zero's distance beyond such a cell measured on the lattice itself
      (:func:`sslpv_gl.bounded.partial_sink_offsets`, Eq. (D4); ``o`` runs from about
-     -0.07 to 0.93 cells).
+     -0.07 to 0.93 cells). ``o`` is the ``diffusion`` lattice's, the one lattice matched
+     to diffusion theory, so only the ``diffusion`` mapping gets partial sinks
+     (:func:`sslpv_gl.material.lpv_material`). The other mappings keep the layer by
+     whole cells, every outside cell whose centre lies within ``z_b`` of the surface:
+     their lattices' zero is not measured, and the collision family calibrated with
+     partial sinks was measured worse against the truth (``docs/diffusion_mapping.md``
+     Sec. 7).
 
 Limits
 ------
 * Distances to the surface are measured between cell centres on the grid
   (Euclidean distance transform of the inside mask): exact for a face normal to a
-  grid axis, approximate where the surface is oblique to the grid. ``o(f)`` is the
-  ``diffusion`` lattice's (Eq. (D4)); other mappings' lattices get the same cells.
-  Below ``z_b`` of about 0.43 cells (``-o(0) + 1/2``) the layer is empty and the
-  mode equals ``absorb``.
+  grid axis, approximate where the surface is oblique to the grid. Below ``z_b`` of
+  about 0.43 cells (``-o(0) + 1/2``; half a cell by whole cells) the layer is empty
+  and the mode equals ``absorb``.
 * ``z_b`` varies with colour (``D`` does); the masks are per colour.
 """
 
@@ -183,7 +188,8 @@ def outside_masks(inside_mask, mode, zb_cells=None, offsets=None):
     ``(C,)`` or ``(N, N, N, C)`` (needed for ``extrapolated`` only; its value in
     the nearest inside cell is used). ``C`` is 3 (colours). ``offsets``: the lattice's
     ``(emit, o(emit))`` table of Eq. (B4), :func:`sslpv_gl.bounded.partial_sink_offsets`
-    (needed for ``extrapolated`` only; passed in so that this module needs no lattice).
+    (``extrapolated`` only; passed in so that this module needs no lattice); None gives the
+    layer by whole cells, every outside cell whose centre lies within ``z_b`` of the surface.
     """
     if mode not in OUTSIDE_MODES:
         raise ValueError(f"unknown outside mode {mode!r}; use one of {', '.join(OUTSIDE_MODES)}")
@@ -200,12 +206,12 @@ def outside_masks(inside_mask, mode, zb_cells=None, offsets=None):
         return ins, ins
     if mode == "interior":                           # the pair rule is empty_mask's
         return ins, ones
-    # extrapolated: the medium continues past the surface and the lattice's zero of the fluence is put
-    # at z_b beyond it (Eq. (B4)): full layer cells, one partial sink, then sinks.
+    # extrapolated: the medium continues past the surface; with the lattice's offsets its zero of the
+    # fluence is put at z_b beyond it (Eq. (B4)): full layer cells, one partial sink, then sinks.
     from scipy.ndimage import distance_transform_edt
 
-    if zb_cells is None or offsets is None:
-        raise ValueError("outside mode 'extrapolated' needs zb_cells and offsets (sslpv_gl.bounded.partial_sink_offsets())")
+    if zb_cells is None:
+        raise ValueError("outside mode 'extrapolated' needs zb_cells")
     if not inside.any():
         return ins, ins
     # distance (cells) from each outside centre to the nearest inside centre, and that centre's index
@@ -216,6 +222,9 @@ def outside_masks(inside_mask, mode, zb_cells=None, offsets=None):
     # the surface lies about half way between an inside and an outside centre; t: how far the
     # zero should lie beyond this cell's centre
     t = 0.5 + zb - dist[..., None]
+    if offsets is None:                              # whole cells: the centre within z_b of the surface
+        keep = (inside[..., None] | (t >= 0.0)).astype(np.float64)
+        return keep, keep
     f_tab, o_tab = (np.asarray(v, dtype=np.float64) for v in offsets)
     full = inside[..., None] | (t >= o_tab[-1])
     part = ~full & (t >= o_tab[0])

@@ -441,11 +441,12 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
                 "pass the LPV grid's cell-centre inside mask",
             )
         zb_cells = offsets = None
-        if outside == "extrapolated":                # Eq. (B3), (B4) of sslpv_gl.boundary, in cells
-            from .bounded import partial_sink_offsets
-
+        if outside == "extrapolated":                # Eq. (B3) of sslpv_gl.boundary, in cells
             zb_cells = boundary.extrapolation_distance(sigma_t, albedo, g_medium, eta) / dx
-            offsets = partial_sink_offsets()
+            if mapping == "diffusion":               # Eq. (B4): the diffusion lattice's zero, to a fraction of a cell
+                from .bounded import partial_sink_offsets
+
+                offsets = partial_sink_offsets()
         keep, emit = boundary.outside_masks(mask, outside, zb_cells, offsets)
         # where the medium is not kept, light travels in vacuum: no attenuation, no scattering
         sigma_lpv = np.where(keep > 0, sigma_lpv, 0.0)

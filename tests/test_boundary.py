@@ -87,6 +87,30 @@ class TestMasks:
         assert partial.any() and np.all(one[partial] == 1) and np.all(emit[one == 0] == 0)
         assert np.all(emit[(one == 1) & ~partial] == 1)
 
+    def test_whole_cells_without_the_lattices_offsets(self):
+        """No Eq. (B4) table: every outside cell whose centre lies within z_b of the surface keeps the medium."""
+        from scipy.ndimage import distance_transform_edt
+        inside = sphere_mask()
+        dist = distance_transform_edt(~inside)
+        for zb in (0.2, 1.0, 2.0):
+            keep, emit = boundary.outside_masks(inside, "extrapolated", np.full(3, zb))
+            assert np.array_equal(keep, emit) and set(np.unique(emit)) <= {0.0, 1.0}
+            np.testing.assert_array_equal(keep[..., 0] > 0, inside | (dist - 0.5 <= zb))
+
+    @pytest.mark.parametrize("mapping, partial", [("diffusion", True), ("collision", False), ("literal", False)])
+    def test_partial_sinks_are_the_diffusion_lattices(self, mapping, partial):
+        """Eq. (B4)'s offsets are measured on the diffusion lattice: only that mapping gets partial sinks."""
+        from types import SimpleNamespace
+
+        from sslpv_gl.material import lpv_material
+        N = 16
+        med = SimpleNamespace(bbox_min=[0, 0, 0], bbox_max=[1, 1, 1],
+                              sigma_t=np.full((4, 4, 4, 3), 3.0, np.float32),
+                              albedo=np.full((4, 4, 4, 3), 0.95, np.float32), g=np.zeros((4, 4, 4, 3), np.float32))
+        # z_b = 2 / (3 sigma_t') = 0.22: 3.6 cells
+        emit = lpv_material(med, sphere_mask(N), N, mapping, outside="extrapolated")["emit"]
+        assert bool(((emit > 0) & (emit < 1)).any()) is partial
+
     def test_partial_sink_places_the_zero(self):
         """Eq. (B4) on a laterally uniform slab: the lattice's zero lies ``z_b`` past the surface (Eq. (D4))."""
         f_tab, o_tab = OFFSETS
