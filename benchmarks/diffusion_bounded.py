@@ -48,9 +48,11 @@ def deficit_rows():
     """The back-lit deficit's terms on the slab: boundary mode x source, against Eq. (D1)'s T."""
     print("back-lit slab terms (medium of the first row above): T = flux into the far sinks; T render = "
           "pi L A / P as the render reads the far side (last inside cell: Eq. (21) scale; first outside cell: "
-          "Eq. (21) in the extrapolated layer, 1 in a sink; old out: Eq. (21) in a sink too, as before the sink fix)")
+          "Eq. (21) in the extrapolated layer, 1 in a sink; old out: Eq. (21) in a sink too, as before the sink fix; "
+          "J in, J out: the same cells' fluence read as the exitance at the boundary, phi / (2 A), Eq. (D5), "
+          "over the diffusion T; 0 in a sink)")
     print(f"{'outside':>12} {'source':>18} {'N':>3} {'T lat':>7} {'T diff':>7} {'ratio':>6} "
-          f"{'T rend in':>9} {'T rend out':>10} {'out/diff':>8} {'old out':>8}")
+          f"{'T rend in':>9} {'T rend out':>10} {'out/diff':>8} {'old out':>8} {'J in':>6} {'J out':>6}")
     med = SLABS[0]
     for outside in ("extrapolated", "absorb"):
         for label, kw in (("iso at 1 mfp'", {}), ("lobe at surface", {"lobe": True}),
@@ -59,7 +61,8 @@ def deficit_rows():
                 r = bounded.slab_lattice(*med, N, outside=outside, **kw)
                 print(f"{outside:>12} {label:>18} {N:>3} {r['T']:7.4f} {r['T_diff']:7.4f} "
                       f"{r['T'] / r['T_diff']:6.3f} {r['T_render_in']:9.4f} {r['T_render_out']:10.4f} "
-                      f"{r['T_render_out'] / r['T_diff']:8.3f} {r['T_render_out_R']:8.4f}")
+                      f"{r['T_render_out'] / r['T_diff']:8.3f} {r['T_render_out_R']:8.4f} "
+                      f"{r['T_exitance_in'] / r['T_diff']:6.3f} {r['T_exitance_out'] / r['T_diff']:6.3f}")
 
 
 def sphere_rows(N):

@@ -50,6 +50,12 @@ Equations (cited as "Eq. (Dn)")
      ``extrapolated`` layer (:func:`sslpv_gl.boundary.outside_masks`) inverts it to
      put the zero at ``z_b`` to a fraction of a cell.
 
+(D5) At the extrapolated boundary (``phi = 0`` at ``z_b = 2 A D`` past the surface, the
+     profile linear near it) Fick's law gives the exitance ``J = D phi(0) / z_b =
+     phi(0) / (2 A)``: the light a render should read as Lambertian ``J / pi``, twice
+     (for ``A = 1``) the isotropic part ``phi / (4 pi)`` that Eq. (21) reads.
+     :func:`slab_lattice` reports it in the two cells that straddle the far surface.
+
 The lattice's fluxes are read from its sinks: a sink cell keeps what enters it and
 passes nothing on, so its accumulated ``c00`` (from step 1, ``skip = 0``) is the
 total flux that crossed into it, in the same ``c00`` units as the source. A partial
@@ -218,7 +224,9 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     ``L`` Eq. 5-7 times the cell's radiance scale: Eq. (21) in medium cells, 1 in sinks),
     in the last inside cell (``T_render_in``) and the first outside cell
     (``T_render_out``; ``T_render_out_R`` with Eq. (21)'s scale in a sink too, as before
-    the sink fix), and the arrays ``accum`` and ``pad``.
+    the sink fix), ``T_exitance_in`` / ``T_exitance_out``: the same cells' fluence read as
+    diffusion theory's exitance at the boundary, ``J A / P`` with ``J = phi / (2 A(eta))``
+    (Eq. (D5); 0 in a sink), and the arrays ``accum`` and ``pad``.
     """
     d = 1.0
     dx = d / int(N)
@@ -252,6 +260,11 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     power = np.sqrt(4.0 * np.pi) * c0[4 * i0]        # per cell (P = sqrt(4 pi) c00)
     n_out = np.array([1.0, 0.0, 0.0])
 
+    def exitance(i):
+        # Eq. (D5): diffusion theory's exitance at the extrapolated boundary, J = phi / (2 A), from the cell's fluence
+        phi = float(m["fluence_scale"]) * acc[i, 0]
+        return float(phi / (2.0 * boundary.a_of_eta(eta)) * dx * dx / power) if keep[i] > 0 else 0.0
+
     def read(i, sink_scale=1.0):
         scale = float(m["radiance_scale"]) if keep[i] > 0 else sink_scale
         return float(np.pi * scale * hemisphere_radiance(acc[i], n_out, dx * dx) * dx * dx / power)
@@ -259,6 +272,7 @@ def slab_lattice(sigma_t, albedo, g, N, depth_mfp=1.0, pad=None, eta=1.0, lobe=F
     return {"R": removed[left].sum() / c0[4 * i0], "T": removed[right].sum() / c0[4 * i0],
             "R_diff": R_d, "T_diff": T_d, "z0": z0, "zb": zb, "dx": dx, "kappa": float(m["kappa"]),
             "T_render_in": read(pad + int(N) - 1), "T_render_out": read(pad + int(N)),
+            "T_exitance_in": exitance(pad + int(N) - 1), "T_exitance_out": exitance(pad + int(N)),
             "T_render_out_R": read(pad + int(N), float(m["radiance_scale"])), "accum": acc, "pad": pad}
 
 

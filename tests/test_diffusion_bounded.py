@@ -65,6 +65,16 @@ class TestSlab:
         assert r["T"] == pytest.approx(T_d, rel=TOL)
 
 
+    @pytest.mark.parametrize("N", [32, 64])
+    def test_exitance_at_the_boundary(self, N):
+        """Eq. (D5): the fluence of the two cells straddling the far surface, read as J = phi / (2 A), gives
+        Eq. (D1)'s T within 5 % on their mean (the surface lies half way); the isotropic read is about half."""
+        r = bounded.slab_lattice(*SLABS[0], N)
+        mean = 0.5 * (r["T_exitance_in"] + r["T_exitance_out"])
+        assert mean == pytest.approx(r["T_diff"], rel=TOL)
+        assert r["T_render_in"] < 0.6 * r["T_diff"]
+
+
 class TestSphere:
     def test_point_source_at_the_centre(self):
         """Eq. (D2) at N = 32: escaping power and the fluence at 3 <= r/dx <= a/dx - 3, within 5 %."""
