@@ -88,7 +88,7 @@ PREFIX = "calibrated:"
 #: fitted scales, with their types: a calibrated file records each, a render must match it.
 SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
             "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str,
-            "boundary_reflect": str}
+            "boundary_reflect": str, "exitance": str}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 #: A version 3 form's constants: |a0|, |b0| at most this. They are the scales at all terms 0, which no
@@ -196,6 +196,7 @@ class _Settings(InputModel):
     eta2: Annotated[bool, Field(examples=[False])]
     phase_scaling: Annotated[str, Field(examples=["none"])] = "none"     # files that predate it: the paper's
     boundary_reflect: Annotated[str, Field(examples=["none"])] = "none"  # files that predate it: the paper's
+    exitance: Annotated[str, Field(examples=["isotropic"])] = "isotropic"  # files that predate it: Eq. (21)'s
 
 
 _Coef = Annotated[float, Field(examples=[0.0])]        # finite (InputModel refuses NaN and infinities)

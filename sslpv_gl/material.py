@@ -158,6 +158,8 @@ __all__ = [
     "map_material_full",
     "lpv_material",
     "PHASE_SCALINGS",
+    "EXITANCES",
+    "check_exitance",
     "delta_eddington",
     "transport_k1",
     "medium_diffusion",
@@ -361,6 +363,37 @@ OUTSIDE_MODES = boundary.OUTSIDE_MODES
 
 #: ``phase_scaling`` choices of :func:`lpv_material`.
 PHASE_SCALINGS = ("none", "delta-eddington")
+#: How the shading reads a ``diffusion`` cell: its isotropic part (Eq. (21)) or the exitance at the
+#: extrapolated boundary (Eq. (D5) of :mod:`sslpv_gl.bounded`).
+EXITANCES = ("isotropic", "boundary")
+
+
+def check_exitance(family, outside, exitance):
+    """One line when ``exitance = boundary`` is combined with a mapping or outside treatment it does not support."""
+    if exitance not in EXITANCES:
+        raise InputError("--exitance", "exitance", f"unknown exitance {exitance!r}", "use one of: " + ", ".join(EXITANCES))
+    if exitance == "boundary" and (family != "diffusion" or outside != "extrapolated"):
+        raise InputError("--exitance", "exitance", "boundary reads the exitance at diffusion theory's extrapolated "
+                         f"boundary, which needs the diffusion mapping and outside extrapolated; got mapping "
+                         f"{family!r}, outside {outside!r}",
+                         "pass --mapping diffusion --outside extrapolated, or leave --exitance at isotropic")
+
+
+def boundary_exitance_factor(sigma_t, albedo, g, eta, dx):
+    """Eq. (D5) in a render: the factor on Eq. (21)'s radiance scale that reads a cell as ``J / pi``.
+
+    ``J = D phi / z`` with ``z`` where the lattice's fluence vanishes past the surface: ``z_b = 2 A D``
+    (Eq. (B3)), or, where the extrapolated layer cannot hold it (``z_b`` under ``1/2 + o(0)`` cells, Eq.
+    (B4): the layer is empty and the zero lies just inside the first sink's centre), that distance. Eq.
+    (21) reads ``phi / (4 pi)``, so the factor is ``4 D / z``: ``2 / A(eta)`` where the layer holds ``z_b``.
+    """
+    from .bounded import partial_sink_offsets
+
+    _, sigma_tp, _ = diffusion.diffusion_coefficients(sigma_t, albedo, g)
+    D = 1.0 / (3.0 * np.asarray(sigma_tp, dtype=np.float64))
+    zb = boundary.extrapolation_distance(sigma_t, albedo, g, eta)
+    z_min = (0.5 + float(partial_sink_offsets()[1][0])) * float(dx)
+    return 4.0 * D / np.maximum(zb, z_min)
 
 
 def delta_eddington(sigma_t, albedo, g):
@@ -375,7 +408,7 @@ def delta_eddington(sigma_t, albedo, g):
 
 
 def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", outside="vacuum", eta=1.0,
-                 sigma_scale=1.0, resampled=None, phase_scaling="none", form=None):
+                 sigma_scale=1.0, resampled=None, phase_scaling="none", form=None, exitance="isotropic"):
     """LPV material grids for Sec. 3.2 -> dict of float32 (N, N, N, 3).
 
     Keys ``sigma_lpv`` (per scene unit), ``sigma_s_prime`` (in ``[0, 1]``),
@@ -390,7 +423,9 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
     multiplies the mapped ``sigma_lpv`` (a calibrated free parameter,
     :mod:`sslpv_gl.calibrated`); ``resampled`` is ``resample_medium(medium, N,
     resample)`` when the caller already has it; ``phase_scaling`` one of :data:`PHASE_SCALINGS`;
-    ``form`` (a :class:`~sslpv_gl.material_form.Form`) multiplies ``sigma_lpv`` by its per-cell
+    ``exitance = "boundary"`` (``diffusion`` with ``extrapolated`` only) multiplies the medium cells'
+    radiance scale by :func:`boundary_exitance_factor` (Eq. (D5)); ``form`` (a
+    :class:`~sslpv_gl.material_form.Form`) multiplies ``sigma_lpv`` by its per-cell
     sigma factor and adds ``radiance_factor`` (float64, its per-cell radiance factor, which
     :func:`sslpv_gl.steps._with_global_scale` folds into ``radiance_scale`` with the budget's
     scalar one). Other parameters: the module docstring.
@@ -403,6 +438,7 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
                          "use one of: " + ", ".join(PHASE_SCALINGS))
     _check_choice(resample, RESAMPLERS, "resample")
     _check_choice(outside, OUTSIDE_MODES, "outside")
+    check_exitance(mapping, outside, exitance)
     medium = getattr(medium, "medium", medium)       # accept a Scene too
     N = int(N)
     extent = np.asarray(medium.bbox_max, dtype=np.float64) - np.asarray(
@@ -460,6 +496,9 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
             # exitant radiance (exactly Phi / (pi A) for a clamped-cosine lobe). Scaling it by R
             # (~0.1 at sigma_t' dx ~ 0.5) was the main term of the back-lit deficit.
             radiance_scale = np.where(keep > 0, radiance_scale, 1.0)
+            if exitance == "boundary":               # Eq. (D5): the medium's cells read as J / pi
+                factor = boundary_exitance_factor(sigma_t, albedo, g_medium, eta, dx)
+                radiance_scale = np.where(keep > 0, radiance_scale * factor, radiance_scale)
 
     return {
         "sigma_lpv": sigma_lpv.astype(np.float32),

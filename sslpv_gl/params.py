@@ -16,7 +16,7 @@ from harness.errors import InputError
 
 from .boundary import OUTSIDE_MODES
 from .calibrated import load_calibrated, parse_mapping
-from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS, check_transport_outside
+from .material import MAPPINGS, PHASE_SCALINGS, RESAMPLERS, check_exitance, check_transport_outside
 from .reflect import BOUNDARY_REFLECTS, check
 
 __all__ = ["SSLPVParams", "Resolved", "LOOKUPS", "PRECISIONS", "OUTSIDE", "STEP_MODES", "PAPER_SETTINGS",
@@ -27,7 +27,7 @@ PRECISIONS = ("fp32", "fp16")
 OUTSIDE = OUTSIDE_MODES
 #: The settings whose other values are extensions (options the paper does not have), with the paper's value of each.
 PAPER_SETTINGS = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
-                  "inject_offset": 0.0}
+                  "inject_offset": 0.0, "exitance": "isotropic"}
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
 EXTENSION_MAPPINGS = {"transport": "collision"}
 #: ``steps`` values other than a count: propagate to convergence, or solve the steady state.
@@ -70,6 +70,10 @@ class SSLPVParams:
     boundary_reflect: str = _p("none", "dielectric boundary: none (the paper: all light reaching the surface "
                                        "from inside leaves) or rdr (R_dr(eta) of it returns into the medium, "
                                        "mirrored; sslpv_gl.reflect); outside vacuum, absorb or interior")
+    exitance: str = _p("isotropic", "how the shading reads a diffusion-mapped cell: isotropic (its fluence's "
+                                    "isotropic part, Eq. (21)) or boundary (diffusion theory's exitance at the "
+                                    "extrapolated boundary, J = phi / (2 A); diffusion with outside extrapolated "
+                                    "only; sslpv_gl.bounded Eq. (D5))")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
     skip: int = _p(2, "first propagation steps not accumulated (paper Sec. 4: 2), in [0, steps]")
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")
@@ -131,6 +135,8 @@ class SSLPVParams:
                 bad("mapping", "a calibrated mapping brings its own sigma_scale and radiance_scale",
                     "leave --sigma-scale and --radiance-scale at 1 with calibrated:PATH")
             self.resolved()                          # the file, its budget and settings are checked now
+        family = self.mapping if parse_mapping(self.mapping) is None else self.resolved().family
+        check_exitance(family, self.outside, self.exitance)
         if not isinstance(self.eta2, bool):
             bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")
         if isinstance(self.steps, int) and self.skip > self.steps:

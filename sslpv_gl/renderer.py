@@ -205,7 +205,7 @@ class SSLPVRenderer:
         eta = float(scene.boundary.eta)
         reflect.check(params.boundary_reflect, params.outside, eta)
         key = (scene.content_hash, params.N, res.family, res.sigma_scale, params.resample, params.outside, eta,
-               params.phase_scaling, params.boundary_reflect, res.form)
+               params.phase_scaling, params.boundary_reflect, res.form, params.exitance)
         mat = self._material_cache.get(key)
         if mat is None:
             med = scene.medium
@@ -220,7 +220,7 @@ class SSLPVRenderer:
             inside, resampled = geo
             mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
                                sigma_scale=res.sigma_scale, resampled=resampled, phase_scaling=params.phase_scaling,
-                               form=res.form)
+                               form=res.form, exitance=params.exitance)
             mat["inside"] = inside
             mat["r_dr"] = reflect.reflectance(params.boundary_reflect, eta)   # 0: the paper (sslpv_gl.reflect)
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.

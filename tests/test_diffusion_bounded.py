@@ -154,3 +154,75 @@ class TestSinkRadiance:
         else:                                        # 1 where the medium is not kept (sinks, empty cells)
             np.testing.assert_array_equal(rs[~medium], 1.0)
             assert (~medium).any()
+
+
+class TestBoundaryExitance:
+    """``exitance = boundary`` (Eq. (D5) in a render): the diffusion cells of an extrapolated boundary read as J / pi."""
+
+    def _material(self, exitance, sigma_t=3.0, N=16, eta=1.0):
+        from types import SimpleNamespace
+
+        c = (np.arange(N) + 0.5) / N - 0.5
+        z, y, x = np.meshgrid(c, c, c, indexing="ij")
+        inside = x**2 + y**2 + z**2 < 0.3**2
+        med = SimpleNamespace(bbox_min=[0, 0, 0], bbox_max=[1, 1, 1],
+                              sigma_t=np.full((4, 4, 4, 3), sigma_t, np.float32),
+                              albedo=np.full((4, 4, 4, 3), 0.95, np.float32), g=np.zeros((4, 4, 4, 3), np.float32))
+        return lpv_material(med, inside, N, "diffusion", outside="extrapolated", eta=eta, exitance=exitance), inside
+
+    @pytest.mark.parametrize("eta", [1.0, 1.4])
+    def test_an_isotropic_cell_reads_phi_over_2a(self, eta):
+        """An isotropic cell's shaded radiance is J / pi = phi / (2 pi A) (A by Egan and Hilgeman's fit, to 2 %),
+        twice (A = 1) what Eq. (21) reads; sinks keep the scale 1."""
+        from sslpv_gl import boundary
+
+        N, sigma_t = 16, 3.0
+        iso, _ = self._material("isotropic", sigma_t, N, eta)
+        bnd, _ = self._material("boundary", sigma_t, N, eta)
+        medium = bnd["sigma_lpv"][..., 0] > 0
+        fdr = boundary.egan_hilgeman_fdr(eta)
+        A = (1 + fdr) / (1 - fdr)
+        phi = float(diffusion.diffusion_mapping(sigma_t, 0.95, 0.0, 1.0 / N)["fluence_scale"])   # per unit c00
+        n = np.array([0.0, 0.0, 1.0])
+        L = float(bnd["radiance_scale"][medium][0, 0]) * hemisphere_radiance(np.array([1.0, 0, 0, 0]), n, (1.0 / N) ** 2)
+        assert L == pytest.approx(phi / (2 * np.pi * A), rel=0.02)
+        np.testing.assert_allclose(bnd["radiance_scale"][medium] / iso["radiance_scale"][medium], 2.0 / A, rtol=0.02)
+        np.testing.assert_array_equal(bnd["radiance_scale"][~medium], 1.0)
+
+    def test_a_layer_thinner_than_the_lattice_zero_uses_that_zero(self):
+        """z_b under about 0.43 cells: the layer is empty and the zero lies at the first sink, so J = D phi / z_min."""
+        N, sigma_t = 16, 30.0                        # z_b = 2 / (3 * 30) = 0.022 = 0.36 cells
+        iso, _ = self._material("isotropic", sigma_t, N)
+        bnd, _ = self._material("boundary", sigma_t, N)
+        medium = iso["sigma_lpv"][..., 0] > 0
+        f_tab, o_tab = bounded.partial_sink_offsets()
+        D = 1.0 / (3 * sigma_t)
+        want = 4 * D / ((0.5 + o_tab[0]) / N)
+        np.testing.assert_allclose(bnd["radiance_scale"][medium] / iso["radiance_scale"][medium], want, rtol=1e-5)
+        assert want < 2.0
+
+    def test_refused_beyond_diffusion_and_extrapolated(self):
+        from harness.errors import InputError
+        from sslpv_gl.params import SSLPVParams
+
+        for kw in ({"mapping": "collision", "outside": "extrapolated"}, {"mapping": "diffusion", "outside": "absorb"}):
+            with pytest.raises(InputError, match="--exitance: exitance: boundary reads"):
+                SSLPVParams(exitance="boundary", **kw)
+        with pytest.raises(InputError, match="--exitance: exitance: unknown exitance"):
+            SSLPVParams(exitance="sideways")
+
+    @pytest.mark.parametrize("argv, needle", [
+        (["--exitance", "boundary"], "boundary reads the exitance at diffusion theory's extrapolated boundary, which "
+         "needs the diffusion mapping and outside extrapolated; got mapping 'collision', outside 'vacuum'"),
+        (["--exitance", "boundary", "--mapping", "diffusion", "--outside", "absorb"], "outside 'absorb'"),
+        (["--exitance", "boundary", "--mapping", "calibrated:baselines/calibrated/collision_extrapolated/calibrated.toml"],
+         "was calibrated with exitance='isotropic'"),   # a calibration fitted without the extension
+    ])
+    def test_the_command_line_refuses_in_one_line(self, tmp_path, capsys, monkeypatch, argv, needle):
+        from tests.test_bad_input import one_line_runner
+
+        cli = one_line_runner(tmp_path, capsys, monkeypatch)
+        import harness.paths as hp
+        monkeypatch.chdir(hp.REPO)                   # the committed calibration's relative path
+        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "8", *argv],
+            "error: --exitance: exitance: ", needle)

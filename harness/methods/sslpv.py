@@ -24,7 +24,7 @@ CLI_TO_FIELD = {
     "lookup": "lookup", "skip": "skip", "inject_offset": "inject_offset", "precision": "precision",
     "rsm_size": "rsm_size", "inject_size": "inject_size", "eta2": "eta2",
     "sigma_scale": "sigma_scale", "radiance_scale": "radiance_scale", "converge_tol": "converge_tol",
-    "max_steps": "max_steps",
+    "max_steps": "max_steps", "exitance": "exitance",
 }
 
 STAGES = ("rsm", "injection", "propagation", "shading")

@@ -43,7 +43,7 @@ from sslpv_gl.params import EXTENSION_MAPPINGS, PAPER_SETTINGS
 PAPER = PAPER_SETTINGS
 #: How a non-paper value is named in a family (the value itself where absent).
 NAMES = {"boundary_reflect": {"rdr": "R_dr"}, "phase_scaling": {"delta-eddington": "δ-Eddington"},
-         "eta2": {True: "η²"}}
+         "eta2": {True: "η²"}, "exitance": {"boundary": "J exitance"}}
 SEPARATOR = " + "
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
 MAPPING_BASE = EXTENSION_MAPPINGS
