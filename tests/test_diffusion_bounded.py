@@ -201,6 +201,25 @@ class TestBoundaryExitance:
         np.testing.assert_allclose(bnd["radiance_scale"][medium] / iso["radiance_scale"][medium], want, rtol=1e-5)
         assert want < 2.0
 
+    @pytest.mark.gl
+    def test_a_render_reads_the_exitance(self, gl_renderer):
+        """Through the GL renderer: the subsurface image where the shading reads medium cells scales by 2 / A, and
+        the material cache tells the two settings apart (an isotropic render after a boundary one is unchanged)."""
+        from harness.scene import load_scene
+        from sslpv_gl.params import SSLPVParams
+
+        scene = load_scene("sphere_homogeneous").with_resolution(32, 32)
+        params = SSLPVParams(N=16, steps=8, skip=0, mapping="diffusion", outside="extrapolated", rsm_size=256,
+                             inject_size=64)
+        a = gl_renderer.render(scene, params).subsurface
+        b = gl_renderer.render(scene, params.replace(exitance="boundary")).subsurface
+        c = gl_renderer.render(scene, params).subsurface
+        np.testing.assert_array_equal(a, c)
+        lit = a > 1e-3 * float(a.max())
+        ratio = b[lit] / a[lit]
+        assert np.median(ratio) == pytest.approx(2.0, rel=0.01)      # index-matched: A = 1
+        assert ratio.min() >= 1.0 - 1e-6 and ratio.max() <= 2.0 + 1e-4
+
     def test_refused_beyond_diffusion_and_extrapolated(self):
         from harness.errors import InputError
         from sslpv_gl.params import SSLPVParams
