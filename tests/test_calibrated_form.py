@@ -405,7 +405,7 @@ class TestSources:
         from harness.calibration.form_files import read_sources as _sources
 
         cal, settings = _sources([self.folder(tmp_path, "a"), self.folder(tmp_path, "b", grid=16)])
-        assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS
+        assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS | {"exitance": "isotropic"}
         assert cal["results"]["N=16 steps=8"]["source"] == str(tmp_path / "b")
 
     @pytest.mark.parametrize("other, field", [({"grid": 32}, "budgets"), ({"family": "diffusion", "grid": 16}, "family"),
