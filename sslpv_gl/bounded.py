@@ -306,9 +306,9 @@ def sphere_lattice(media, N, rtol=1e-9, depth_mfp=None, pole="face"):
     zb = boundary.extrapolation_distance(st, al, gg, 1.0)
     pad = int(np.ceil(zb.max() / dx)) + 3
     half = int(N) // 2 + pad
-    even = depth_mfp is not None and pole == "face"
     if pole not in ("face", "centre"):
         raise ValueError(f"pole must be 'face' or 'centre', not {pole!r}")
+    even = depth_mfp is not None and pole == "face"
     n = 2 * half if even else 2 * half + 1
     idx = np.arange(n) - half + (0.5 if even else 0.0)     # cell centres, in cells from the sphere's centre
     r = np.sqrt(idx[:, None, None] ** 2 + idx[None, :, None] ** 2 + idx[None, None, :] ** 2) * dx

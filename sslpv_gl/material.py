@@ -379,19 +379,20 @@ def check_exitance(family, outside, exitance):
                          "pass --mapping diffusion --outside extrapolated, or leave --exitance at isotropic")
 
 
-def boundary_exitance_factor(sigma_t, albedo, g, eta, dx):
+def boundary_exitance_factor(sigma_t, albedo, g, zb_cells, dx):
     """Eq. (D5) in a render: the factor on Eq. (21)'s radiance scale that reads a cell as ``J / pi``.
 
     ``J = D phi / z`` with ``z`` where the lattice's fluence vanishes past the surface: ``z_b = 2 A D``
-    (Eq. (B3)), or, where the extrapolated layer cannot hold it (``z_b`` under ``1/2 + o(0)`` cells, Eq.
-    (B4): the layer is empty and the zero lies just inside the first sink's centre), that distance. Eq.
-    (21) reads ``phi / (4 pi)``, so the factor is ``4 D / z``: ``2 / A(eta)`` where the layer holds ``z_b``.
+    (Eq. (B3); ``zb_cells`` is it in cells, as the ``extrapolated`` layer has it), or, where the layer
+    cannot hold it (``z_b`` under ``1/2 + o(0)`` cells, Eq. (B4): the layer is empty and the zero lies just
+    inside the first sink's centre), that distance. Eq. (21) reads ``phi / (4 pi)``, so the factor is
+    ``4 D / z``: ``2 / A(eta)`` where the layer holds ``z_b``.
     """
     from .bounded import partial_sink_offsets
 
     _, sigma_tp, _ = diffusion.diffusion_coefficients(sigma_t, albedo, g)
     D = 1.0 / (3.0 * np.asarray(sigma_tp, dtype=np.float64))
-    zb = boundary.extrapolation_distance(sigma_t, albedo, g, eta)
+    zb = np.asarray(zb_cells, dtype=np.float64) * float(dx)
     z_min = (0.5 + float(partial_sink_offsets()[1][0])) * float(dx)
     return 4.0 * D / np.maximum(zb, z_min)
 
@@ -497,7 +498,7 @@ def lpv_material(medium, inside_mask, N, mapping="collision", resample="box", ou
             # (~0.1 at sigma_t' dx ~ 0.5) was the main term of the back-lit deficit.
             radiance_scale = np.where(keep > 0, radiance_scale, 1.0)
             if exitance == "boundary":               # Eq. (D5): the medium's cells read as J / pi
-                factor = boundary_exitance_factor(sigma_t, albedo, g_medium, eta, dx)
+                factor = boundary_exitance_factor(sigma_t, albedo, g_medium, zb_cells, dx)
                 radiance_scale = np.where(keep > 0, radiance_scale * factor, radiance_scale)
 
     return {

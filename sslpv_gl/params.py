@@ -130,12 +130,12 @@ class SSLPVParams:
                                                                                                and v >= 1.0):
                 bad(name, f"must be a number in ({lo:g}, {hi:g}{')' if name == 'converge_tol' else ']'}, got {v!r}",
                     "change the value")
+        family = self.mapping
         if parse_mapping(self.mapping) is not None:
             if self.sigma_scale != 1.0 or self.radiance_scale != 1.0:
                 bad("mapping", "a calibrated mapping brings its own sigma_scale and radiance_scale",
                     "leave --sigma-scale and --radiance-scale at 1 with calibrated:PATH")
-            self.resolved()                          # the file, its budget and settings are checked now
-        family = self.mapping if parse_mapping(self.mapping) is None else self.resolved().family
+            family = self.resolved().family          # the file, its budget and settings are checked now
         check_exitance(family, self.outside, self.exitance)
         if not isinstance(self.eta2, bool):
             bad("eta2", f"must be true or false, got {self.eta2!r}", "change the value")

@@ -90,12 +90,11 @@ def with_extension_outside(fields, params_type, path=None):
     choice = committed_choice(CHOICE if path is None else path)
     if choice is None:
         return fields
-    paper = PAPER_SETTINGS["outside"]
-    ranked = [choice["outside"]] + sorted((m for m, r in choice["by_mode"].items() if r < 1.0 and m != paper),
-                                          key=lambda m: choice["by_mode"][m])
-    for mode in dict.fromkeys(ranked):
-        if mode == paper:
-            break
+    paper, by_mode = PAPER_SETTINGS["outside"], choice["by_mode"]
+    if choice["outside"] == paper:                   # no treatment beat the paper's
+        return fields
+    beat = sorted((m for m, r in by_mode.items() if r < 1.0 and m != paper), key=by_mode.get)
+    for mode in dict.fromkeys([choice["outside"], *beat]):
         try:
             params_type(**{**fields, "outside": mode})
         except InputError:
