@@ -152,6 +152,10 @@ class TestBadInput:
         (["--family", "collision", "--boundary-reflect", "rdr", "--outside", "extrapolated"],
          "--boundary-reflect: boundary_reflect:"),
         (["--family", "diffusion", "--skip", "x"], "--skip: skip:"),
+        (["--family", "diffusion", "--exitance", "lambert"], "--exitance: exitance: unknown exitance 'lambert'"),
+        (["--family", "diffusion", "--exitance", "boundary"], "--exitance: exitance: boundary reads the exitance"),
+        (["--family", "collision", "--outside", "extrapolated", "--exitance", "boundary"],
+         "--exitance: exitance: boundary reads the exitance"),
         (["--family", "transport", "--outside", "vacuum"], "--outside: outside: mapping transport needs"),
         (["--family", "diffusion", "--scenes", "thin_ring"], "--scenes: scenes: 1 scene given"),
         (["--family", "diffusion", "--scenes", "thin_ring,nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
@@ -167,7 +171,8 @@ class TestBadInput:
         assert not out.exists() and list(tmp_path.iterdir()) == []
 
     def test_extension_flags_reach_the_fit(self, tmp_path, capsys, monkeypatch):
-        """--outside, --boundary-reflect and --phase-scaling become the fit's renderer settings (no render here)."""
+        """--outside, --boundary-reflect, --phase-scaling and --exitance become the fit's renderer settings (no
+        render here)."""
         import harness.calibration.run as cal_run
 
         seen = {}
@@ -177,6 +182,21 @@ class TestBadInput:
         assert code == 0, capsys.readouterr().err
         assert seen["settings"] == {"outside": "interior", "boundary_reflect": "rdr",
                                     "phase_scaling": "delta-eddington"}
+        code = main(["calibrate", "--json", "--family", "diffusion", "--out", str(tmp_path / "o"), "--outside",
+                     "extrapolated", "--exitance", "boundary"])
+        assert code == 0, capsys.readouterr().err
+        assert seen["settings"] == {"outside": "extrapolated", "exitance": "boundary"}
+
+    def test_the_compared_mappings_with_an_exitance_fit(self):
+        """The fixed mappings of a fit with exitance = boundary: diffusion shares it, literal and collision (which do
+        not support it) are compared at the paper's isotropic read, so the fit's base params accept them."""
+        from harness.calibration.families import COMPARED
+        from sslpv_gl.params import SSLPVParams
+
+        base = SSLPVParams(mapping="diffusion", skip=0, outside="extrapolated", exitance="boundary")
+        made = {m: base.replace(mapping=m, **over) for m, over in COMPARED.items()}
+        assert made["diffusion"].exitance == "boundary"
+        assert made["literal"].exitance == made["collision"].exitance == "isotropic"
 
     @pytest.mark.parametrize("argv, where", [
         (["--from", "NOWHERE"], "--from: folder: NOWHERE holds no calibration.json"),

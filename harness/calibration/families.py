@@ -54,8 +54,10 @@ FAMILIES = {
                             "scale and a scale on sigma_lpv"),
 }
 
-#: The fixed mappings every calibration page compares with, each at its own recommended settings.
-COMPARED = {"literal": {"skip": 2}, "collision": {"skip": 2}, "diffusion": {"skip": 0}}
+#: The fixed mappings every calibration page compares with, each at its own recommended settings and the fit's
+#: others; the shading's exitance read is the paper's for the mappings that support no other.
+COMPARED = {"literal": {"skip": 2, "exitance": "isotropic"}, "collision": {"skip": 2, "exitance": "isotropic"},
+            "diffusion": {"skip": 0}}
 
 
 def family(name):

@@ -32,6 +32,9 @@ def configure(sp):
                     "default: the family's, none)")
     sp.add_argument("--phase-scaling", dest="phase_scaling", metavar="MODE", help="renderer setting of the fit, an "
                     "extension: none | delta-eddington (default: the family's, none)")
+    sp.add_argument("--exitance", metavar="MODE", help="renderer setting of the fit, an extension: isotropic | "
+                    "boundary (diffusion theory's exitance at the extrapolated boundary; the diffusion family with "
+                    "--outside extrapolated only; default: the family's, isotropic)")
     add_progress(sp)
     add_no_cache(sp)
 
@@ -62,7 +65,7 @@ def run(args):
     settings = {}
     if args.skip is not None:
         settings["skip"] = _numbers("--skip", args.skip, int)[0]
-    for key in ("outside", "boundary_reflect", "phase_scaling"):
+    for key in ("outside", "boundary_reflect", "phase_scaling", "exitance"):
         if getattr(args, key) is not None:
             settings[key] = getattr(args, key)
     rng = None

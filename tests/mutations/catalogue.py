@@ -406,6 +406,12 @@ MUTATIONS = (
              "params.phase_scaling, params.boundary_reflect, res.form)",
              ("tests/test_diffusion_bounded.py::TestBoundaryExitance::test_a_render_reads_the_exitance",),
              "exitance missing from the material cache key: a boundary render after an isotropic one reuses its scale"),
+    Mutation("compared_mappings_take_the_fits_exitance", "boundary", "harness/calibration/families.py",
+             'COMPARED = {"literal": {"skip": 2, "exitance": "isotropic"}, "collision": {"skip": 2, "exitance": '
+             '"isotropic"},',
+             'COMPARED = {"literal": {"skip": 2}, "collision": {"skip": 2},',
+             ("tests/test_calibrate.py::TestBadInput::test_the_compared_mappings_with_an_exitance_fit",),
+             "a calibration with exitance = boundary compares literal and collision at that read, which they refuse"),
     Mutation("partial_sinks_for_every_mapping", "physics", "sslpv_gl/material.py",
              'if mapping == "diffusion":               # Eq. (B4)', 'if True:               # Eq. (B4)',
              ("tests/test_boundary.py::TestMasks::test_partial_sinks_are_the_diffusion_lattices",),
