@@ -31,7 +31,7 @@ def _cell(row):
 
 
 #: The renderer settings a calibration is named after where they are not its family's own.
-NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect")
+NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance")
 
 
 def page_name(cal):

@@ -186,3 +186,23 @@ def test_mnee_chains_runs_write_distinct_pages(monkeypatch):
     assert printouts[2] == "mnee_chains_eta_one_torus_hole_bunny_dielectric"
     assert decompose == ["mnee_chains", "mnee_chains_bunny_dielectric"]
     assert len(set(decompose + printouts)) == 5
+
+
+def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
+    """``calibration_table.py`` names one page per committed calibration: every folder's page name differs, and a
+    setting that is not the family's own (outside, phase scaling, R_dr, the exitance read) is in the name."""
+    import json
+    import tomllib
+
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("bench_calibration_table", ROOT / "benchmarks" / "calibration_table.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    names = {}
+    for folder in sorted((ROOT / "baselines" / "calibrated").iterdir()):
+        if folder.name == "best" or "form" in tomllib.loads((folder / "calibrated.toml").read_text()):
+            continue                                    # the selection, and the forms (calibration_form.py's pages)
+        names[folder.name] = mod.page_name(json.loads((folder / "calibration.json").read_text()))[0]
+    assert len(set(names.values())) == len(names), names
+    assert names["diffusion_exitance"] == "calibration_diffusion_extrapolated_boundary"
+    assert names["collision_extrapolated"] == "calibration_collision_extrapolated"
