@@ -440,3 +440,25 @@ def test_study_names_a_form_apart_from_its_scalar_family(tmp_path):
                                   {"loss": "t", "slopes": "channels"}))
     assert study_label(f"calibrated:{channels}") == "calibrated collision channel form"
     assert study_label("collision") == "collision"
+
+
+def test_study_names_a_calibration_after_its_extensions():
+    """Two calibrations of one family fitted with other extensions are two columns: the extensions beyond the
+    family's own settings are in the label (the transport family's own outside = absorb is not), in parentheses so
+    that the column stays a calibration, not an extension family (harness.study.extensions.is_extension)."""
+    from pathlib import Path
+
+    from harness.study.extensions import is_extension
+    from harness.study.spec import study_label
+
+    root = Path(__file__).resolve().parents[1]
+    labels = {p.parent.name: study_label(f"calibrated:{p}")
+              for p in sorted((root / "baselines" / "calibrated").glob("*/calibrated.toml"))}
+    assert labels["diffusion"] == "calibrated diffusion"
+    assert labels["diffusion_exitance"] == "calibrated diffusion (extrapolated, J exitance)"
+    assert labels["transport"] == "calibrated transport"
+    assert labels["transport_interior"] == "calibrated transport (interior)"
+    assert labels["collision_delta_eddington"] == "calibrated collision (δ-Eddington)"
+    same_fit = {"best", "collision_n16", "collision_n64", "diffusion_n16"}      # the same fits at another grid
+    assert len({v for k, v in labels.items() if k not in same_fit}) == len(labels) - len(same_fit)
+    assert not any(is_extension({"method": "sslpv", "family": v}) for v in labels.values())

@@ -86,12 +86,27 @@ def study_label(mapping):
         cal = load_calibrated(m.split(':', 1)[1], tuple(MAPPINGS))
         forms = [b.form for b in cal.budgets if b.form is not None]
         if not forms:
-            return f"calibrated {cal.family}"
-        if cal.fit.get("slopes") in ("loss", "channels"):
-            return f"calibrated {cal.family} {'loss' if cal.fit['slopes'] == 'loss' else 'channel'} form"
-        return f"calibrated {cal.family}" + (" radiance" if not any(any(f.sigma) for f in forms) else "") + " form"
+            name = f"calibrated {cal.family}"
+        elif cal.fit.get("slopes") in ("loss", "channels"):
+            name = f"calibrated {cal.family} {'loss' if cal.fit['slopes'] == 'loss' else 'channel'} form"
+        else:
+            name = f"calibrated {cal.family}" + (" radiance" if not any(any(f.sigma) for f in forms) else "") + " form"
+        return name + _fit_extensions(cal)
     except InputError:
         return "calibrated " + Path(m.split(":", 1)[1]).parent.name
+
+
+def _fit_extensions(cal):
+    """``" (extrapolated, J exitance)"``: the extensions a calibrated file was fitted with beyond its family's own
+    settings (:data:`harness.calibration.families.FAMILIES`), so that two calibrations of one family with other
+    extensions are two columns; ``""`` where there are none. In parentheses, not joined with `` + ``: a
+    calibration stays a column of the headline, not an extension family judged against its base."""
+    from harness.calibration.families import FAMILIES
+    from harness.study.extensions import extension_tags
+
+    own = FAMILIES[cal.family].settings if cal.family in FAMILIES else {}
+    tags = extension_tags({k: v for k, v in cal.settings.items() if own.get(k, object()) != v})
+    return f" ({', '.join(tags)})" if tags else ""
 
 
 def _calibration_products(files, budget, path):
