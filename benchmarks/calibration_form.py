@@ -13,7 +13,8 @@ For a form fitted on the loss (F8, F9) it prints the leave-one-out loss of the f
 mean ln relMSE of the held-out renders (the only mean it computes, from the figures in the report).
 
 Otherwise it computes nothing: every figure is the form's own (the scalar family's as the form's report copied them). ``--write`` puts the tables on the
-page ``docs/benchmarks/calibration_form_<family>.md`` (``..._radiance.md`` for a form fitted with
+page ``docs/benchmarks/calibration_form_<family>.md``, the family followed by the settings that are not its own
+(``calibration_form_collision_extrapolated_loss.md``; ``calibration_table.settings_suffix``) (``..._radiance.md`` for a form fitted with
 ``--slopes radiance``, Eq. F7, ``..._loss.md`` for ``--slopes loss``, Eq. F8, ``..._channels.md`` for ``--slopes
 channels``, Eq. F9; ``benchmarks/page.py``).
 
@@ -33,6 +34,19 @@ def _cell(row):
     return "" if not row or row.get("relmse") is None else f"{row['energy_ratio']:.3g} / {row['relmse']:.3g}"
 
 
+def page_name(form):
+    """``(page name, title)`` of a form's page (module docstring)."""
+    from calibration_table import settings_suffix
+
+    slopes = form.get("slopes", "both")
+    suffix, with_ = settings_suffix(form)
+    return (f"calibration_form_{form['family']}" + suffix + ("" if slopes == "both" else f"_{slopes}"),
+            f"The calibration of the {form['family']} family{with_} as a form of the material"
+            + {"both": "", "radiance": ": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)",
+               "loss": ": both scales per cell, fitted on the render loss (Eq. F8)",
+               "channels": ": both scales per cell, fitted on the render loss channel by channel (Eq. F9)"}[slopes])
+
+
 def main(argv=None):
     from page import Page
 
@@ -46,12 +60,7 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     form = json.loads(path.read_text())
-    slopes = form.get("slopes", "both")
-    page = Page(f"calibration_form_{form['family']}" + ("" if slopes == "both" else f"_{slopes}"),
-                f"The calibration of the {form['family']} family as a form of the material"
-                + {"both": "", "radiance": ": sigma_scale the scalar fit's, radiance_scale per cell (Eq. F7)",
-                   "loss": ": both scales per cell, fitted on the render loss (Eq. F8)",
-                   "channels": ": both scales per cell, fitted on the render loss channel by channel (Eq. F9)"}[slopes])
+    page = Page(*page_name(form))
     with page.capture(markdown=True):
         _tables(form)
     page.finish(args.write)

@@ -34,10 +34,10 @@ def _cell(row):
 NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance")
 
 
-def page_name(cal):
-    """``(page name, title)`` of a calibration: one page per calibration, named after its family, after each
-    setting of :data:`NAMED_SETTINGS` where it is not the family's own (a family calibrated with another outside
-    treatment or phase scaling is another calibration), and after its grids where they are not N = 32."""
+def settings_suffix(cal):
+    """``(name suffix, title suffix)``: each setting of :data:`NAMED_SETTINGS` of a calibration (scalar or form)
+    where it is not its family's own (a family calibrated with another outside treatment, phase scaling or
+    exitance read is another calibration): ``("_extrapolated", " with outside = extrapolated")``."""
     from harness.calibration.families import FAMILIES
     from harness.study.extensions import PAPER
 
@@ -45,11 +45,18 @@ def page_name(cal):
                **(FAMILIES[cal["family"]].settings if cal["family"] in FAMILIES else {}))
     settings = cal.get("settings", {})
     extras = [(k, settings[k]) for k in NAMED_SETTINGS if k in settings and settings[k] != own[k]]
+    return ("".join("_" + str(v).replace("-", "_") for _, v in extras),
+            " with " + ", ".join(f"{k} = {v}" for k, v in extras) if extras else "")
+
+
+def page_name(cal):
+    """``(page name, title)`` of a calibration: one page per calibration, named after its family, after its
+    settings that are not the family's own (:func:`settings_suffix`), and after its grids where they are not
+    N = 32."""
+    suffix, with_ = settings_suffix(cal)
     grids = sorted({int(v["N"]) for v in cal["results"].values()})
-    name = f"calibration_{cal['family']}" + "".join("_" + str(v).replace("-", "_") for _, v in extras)
-    title = f"The calibration of the {cal['family']} family"
-    if extras:
-        title += " with " + ", ".join(f"{k} = {v}" for k, v in extras)
+    name = f"calibration_{cal['family']}" + suffix
+    title = f"The calibration of the {cal['family']} family" + with_
     if grids != [32]:
         name += "".join(f"_n{n}" for n in grids)
         title += " at N = " + ", ".join(map(str, grids))

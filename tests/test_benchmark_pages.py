@@ -195,14 +195,23 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
     import tomllib
 
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location("bench_calibration_table", ROOT / "benchmarks" / "calibration_table.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mods = {}
+    for name in ("calibration_table", "calibration_form"):
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "benchmarks" / f"{name}.py")
+        mods[name] = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mods[name])
     names = {}
     for folder in sorted((ROOT / "baselines" / "calibrated").iterdir()):
-        if folder.name == "best" or "form" in tomllib.loads((folder / "calibrated.toml").read_text()):
-            continue                                    # the selection, and the forms (calibration_form.py's pages)
-        names[folder.name] = mod.page_name(json.loads((folder / "calibration.json").read_text()))[0]
+        if folder.name == "best":
+            continue                                    # the selection: the winner's own page
+        kind = "calibration_form" if "form" in tomllib.loads((folder / "calibrated.toml").read_text()) \
+            else "calibration_table"
+        names[folder.name] = mods[kind].page_name(json.loads((folder / "calibration.json").read_text()))[0]
     assert len(set(names.values())) == len(names), names
     assert names["diffusion_exitance"] == "calibration_diffusion_extrapolated_boundary"
     assert names["collision_extrapolated"] == "calibration_collision_extrapolated"
+    assert names["collision_loss_form"] == "calibration_form_collision_loss"
+    assert names["collision_extrapolated_loss_form"] == "calibration_form_collision_extrapolated_loss"
+    for page in names.values():                         # every committed calibration's page is committed
+        if page != "calibration_collision_n16" and page != "calibration_diffusion_n16":
+            assert (ROOT / "docs" / "benchmarks" / f"{page}.md").is_file(), page
