@@ -75,7 +75,7 @@ def test_met_when_every_group_is_in_range_and_the_median_is_half(tmp_path):
     assert b["relmse"]["baseline"] == "scalar_b"                   # the lowest scalar median, the form left out
     assert b["relmse"]["limit"] == pytest.approx(0.05)
     intro, rows, verdict = target_table(t)
-    assert "**yes**" in verdict and len(rows) == 8 and f"`{sel.resolve()}` names" in intro
+    assert "**yes**" in verdict and len(rows) == 10 and f"`{sel.resolve()}` names" in intro     # 5 rows per budget
 
 
 def test_the_fitted_scenes_are_judged_held_out_not_in_sample(tmp_path):
@@ -210,3 +210,21 @@ def test_a_fitted_scene_without_a_floor_row_counts_as_zero(tmp_path):
     _floor(tmp_path / "form", {s: 0.3 for s in FITTED[:2]})
     fl = _groups(target(_rows(), cals, BUDGET, _scenes(), selection=sel), 32)[1]["relmse"]["floor"]
     assert fl["bound"] == 0.0
+
+
+@pytest.mark.parametrize("inside, verdict", [(0.02, "within"), (0.07, "**above**")])
+def test_the_in_sample_median_splits_form_from_generalisation(tmp_path, inside, verdict):
+    """Beside the held-out median, the in-sample one (the fit on every scene): its row says whether the form misses
+    the limit (0.05 here) even on the scenes it saw; the target itself stays the held-out median's."""
+    held = {s: (1.0, 0.08) for s in FITTED}
+    in_sample = {s: (1.0, inside + 0.001 * i) for i, s in enumerate(FITTED)}
+    sel, cals = _setup(tmp_path, held, in_sample=in_sample)
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    _, b = _groups(t, 32)
+    assert b["relmse"]["in_sample"] == pytest.approx(inside + 0.002) and b["relmse"]["met"] is False
+    _, rows, said = target_table(t)
+    got = [r for r in rows if r[1].startswith("median in-sample relMSE")]
+    assert len(got) == 2 and all(r[4] == verdict for r in got)
+    both = "N=32 steps=32, N=32 steps=steady"
+    assert (f"At {both} the best misses the relMSE limit even in sample" in said) == (inside > 0.05)
+    assert (f"At {both} it meets the relMSE limit in sample and misses it held out" in said) == (inside < 0.05)

@@ -15,7 +15,10 @@ if the study rendered it, :func:`target` checks at the study's grid N and at eac
          the lowest such median among the selection's scalar calibrations (one (s, r) pair per
          budget; the candidates' ``form`` false) at the same budget
 
-Beside (T4), the **floor** of the calibration's family where one was written (``floor.json`` of the calibration
+Beside (T4), the same median **in sample** (each fitted scene rendered with the calibration fitted on every scene,
+its ``calibration.json``): no leave-one-scene-out median of that fit is expected below it, so where it exceeds
+(T4)'s limit the form itself, not its generalisation to an unseen scene, stops (T4); where it lies below, the
+held-out excess over it is the generalisation's. And the **floor** of the calibration's family where one was written (``floor.json`` of the calibration
 or of its sources; :mod:`harness.calibration.floor`): the median over the fitted scenes of each scene at its own
 best ``(s, r)`` per colour channel (Eq. L1), and ``bound``, the same median with every scene whose floor bounds no
 form (its terms vary over the grid, or its least lies at an end of the scan before the loss levelled off), and every
@@ -177,6 +180,9 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
         relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
                   "limit": RELMSE_FACTOR * base[1] if base else None}
         relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
+        ins = res.get("in_sample") or {}
+        rel_in = [ins[s]["relmse"] for s in fitted if ins.get(s, {}).get("relmse") is not None]
+        relmse["in_sample"] = statistics.median(rel_in) if rel_in else None
         relmse["floor"] = _floor(cal["report"], key, fitted)
         out["budgets"].append({"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
                                "met": all(g["met"] for g in groups) and relmse["met"]})
