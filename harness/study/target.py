@@ -96,6 +96,12 @@ def _group(name, entries, need):
             "outside": [x for x in entries if not _in_range(x["energy_ratio"])]}
 
 
+def _median_relmse(figures, fitted):
+    """The median relMSE over the ``fitted`` scenes that ``figures`` (scene -> figures) has one for, or None."""
+    rel = [figures[s]["relmse"] for s in fitted if figures.get(s, {}).get("relmse") is not None]
+    return statistics.median(rel) if rel else None
+
+
 def _baseline(sel, key):
     best = None
     for c in sel.get("candidates", []):
@@ -174,15 +180,12 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
             _group("back-lit homogeneous, not fitted",
                    [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in backlit], len(backlit)),
         ]
-        rel = [held[s]["relmse"] for s in fitted if held.get(s, {}).get("relmse") is not None]
-        median = statistics.median(rel) if rel else None
+        median = _median_relmse(held, fitted)
         base = _baseline(sel, key)
         relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
                   "limit": RELMSE_FACTOR * base[1] if base else None}
         relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
-        ins = res.get("in_sample") or {}
-        rel_in = [ins[s]["relmse"] for s in fitted if ins.get(s, {}).get("relmse") is not None]
-        relmse["in_sample"] = statistics.median(rel_in) if rel_in else None
+        relmse["in_sample"] = _median_relmse(res.get("in_sample") or {}, fitted)
         relmse["floor"] = _floor(cal["report"], key, fitted)
         out["budgets"].append({"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
                                "met": all(g["met"] for g in groups) and relmse["met"]})
