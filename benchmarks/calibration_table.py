@@ -36,15 +36,13 @@ NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance")
 
 def settings_suffix(cal):
     """``(name suffix, title suffix)``: each setting of :data:`NAMED_SETTINGS` of a calibration (scalar or form)
-    where it is not its family's own (a family calibrated with another outside treatment, phase scaling or
-    exitance read is another calibration): ``("_extrapolated", " with outside = extrapolated")``."""
-    from harness.calibration.families import FAMILIES
-    from harness.study.extensions import PAPER
+    where it is not its family's own (:func:`harness.calibration.families.fit_extensions`; a family calibrated
+    with another outside treatment, phase scaling or exitance read is another calibration):
+    ``("_extrapolated", " with outside = extrapolated")``."""
+    from harness.calibration.families import fit_extensions
 
-    own = dict({k: PAPER[k] for k in NAMED_SETTINGS},
-               **(FAMILIES[cal["family"]].settings if cal["family"] in FAMILIES else {}))
-    settings = cal.get("settings", {})
-    extras = [(k, settings[k]) for k in NAMED_SETTINGS if k in settings and settings[k] != own[k]]
+    ext = fit_extensions(cal["family"], cal.get("settings", {}))
+    extras = [(k, ext[k]) for k in NAMED_SETTINGS if k in ext]
     return ("".join("_" + str(v).replace("-", "_") for _, v in extras),
             " with " + ", ".join(f"{k} = {v}" for k, v in extras) if extras else "")
 

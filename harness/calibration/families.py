@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from harness.errors import InputError
 
-__all__ = ["Family", "FAMILIES", "family", "COMPARED"]
+__all__ = ["Family", "FAMILIES", "family", "COMPARED", "fit_extensions"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,17 @@ FAMILIES = {
 #: others; the shading's exitance read is the paper's for the mappings that support no other.
 COMPARED = {"literal": {"skip": 2, "exitance": "isotropic"}, "collision": {"skip": 2, "exitance": "isotropic"},
             "diffusion": {"skip": 0}}
+
+
+def fit_extensions(family_name, settings):
+    """``{setting: value}``: the extensions (:data:`sslpv_gl.params.PAPER_SETTINGS`) among a calibration's renderer
+    ``settings`` whose value is not its family's own (the family's setting, else the paper's): what makes a
+    calibration of the family with other extensions another calibration. An unknown family has no settings of
+    its own."""
+    from sslpv_gl.params import PAPER_SETTINGS
+
+    own = FAMILIES[family_name].settings if family_name in FAMILIES else {}
+    return {k: v for k, v in settings.items() if k in PAPER_SETTINGS and v != own.get(k, PAPER_SETTINGS[k])}
 
 
 def family(name):

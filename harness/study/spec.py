@@ -98,14 +98,13 @@ def study_label(mapping):
 
 def _fit_extensions(cal):
     """``" (extrapolated, J exitance)"``: the extensions a calibrated file was fitted with beyond its family's own
-    settings (:data:`harness.calibration.families.FAMILIES`), so that two calibrations of one family with other
+    settings (:func:`harness.calibration.families.fit_extensions`), so that two calibrations of one family with other
     extensions are two columns; ``""`` where there are none. In parentheses, not joined with `` + ``: a
     calibration stays a column of the headline, not an extension family judged against its base."""
-    from harness.calibration.families import FAMILIES
+    from harness.calibration.families import fit_extensions
     from harness.study.extensions import extension_tags
 
-    own = FAMILIES[cal.family].settings if cal.family in FAMILIES else {}
-    tags = extension_tags({k: v for k, v in cal.settings.items() if own.get(k, object()) != v})
+    tags = extension_tags(fit_extensions(cal.family, cal.settings))
     return f" ({', '.join(tags)})" if tags else ""
 
 
