@@ -31,7 +31,14 @@ def _cell(row):
 
 
 #: The renderer settings a calibration is named after where they are not its family's own.
-NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance")
+NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance", "inject_depth")
+
+
+def _name_part(key, value):
+    """A setting's part of a page name: its value (``extrapolated``), or for a number the setting too (``depth1``)."""
+    if key == "inject_depth":
+        return f"depth{value:g}".replace(".", "p")
+    return str(value).replace("-", "_")
 
 
 def settings_suffix(cal):
@@ -43,8 +50,9 @@ def settings_suffix(cal):
 
     ext = fit_extensions(cal["family"], cal.get("settings", {}))
     extras = [(k, ext[k]) for k in NAMED_SETTINGS if k in ext]
-    return ("".join("_" + str(v).replace("-", "_") for _, v in extras),
-            " with " + ", ".join(f"{k} = {v}" for k, v in extras) if extras else "")
+    return ("".join("_" + _name_part(k, v) for k, v in extras),
+            " with " + ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in extras)
+            if extras else "")
 
 
 def page_name(cal):

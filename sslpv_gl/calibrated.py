@@ -88,7 +88,7 @@ PREFIX = "calibrated:"
 #: fitted scales, with their types: a calibrated file records each, a render must match it.
 SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
             "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str,
-            "boundary_reflect": str, "exitance": str}
+            "boundary_reflect": str, "exitance": str, "inject_depth": float}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 #: A version 3 form's constants: |a0|, |b0| at most this. They are the scales at all terms 0, which no
@@ -197,6 +197,7 @@ class _Settings(InputModel):
     phase_scaling: Annotated[str, Field(examples=["none"])] = "none"     # files that predate it: the paper's
     boundary_reflect: Annotated[str, Field(examples=["none"])] = "none"  # files that predate it: the paper's
     exitance: Annotated[str, Field(examples=["isotropic"])] = "isotropic"  # files that predate it: Eq. (21)'s
+    inject_depth: Annotated[float, Field(ge=0.0, le=16.0, examples=[0.0])] = 0.0   # files that predate it: the paper's
 
 
 _Coef = Annotated[float, Field(examples=[0.0])]        # finite (InputModel refuses NaN and infinities)
@@ -311,6 +312,7 @@ def _parse(path, data, families):
     budgets = tuple(_budget(b, f.form) for b in f.budget)
     settings = f.settings.model_dump()
     settings["inject_offset"] = float(settings["inject_offset"])
+    settings["inject_depth"] = float(settings["inject_depth"])
     return Calibrated(path=path, sha256=sha, family=f.family, budgets=budgets, fit=f.fit, settings=settings)
 
 

@@ -13,11 +13,38 @@
      - one point per RSM texel, refracted clamped-cosine lobe times
        ``(1/pi) T Phi_p``, summed per cell by additive blending into the
        atlas; the atlas copied into the destination grid
+   * - :func:`depth_offsets`
+     - --
+     - --
+     - ``inject_depth`` (an extension) in scene units per cell: that many
+       reduced mean free paths ``1 / sigma_t'`` of the cell's medium, Eq. (J1)
    * - :func:`texel_textures`
      - --
      - --
      - given ``(M, 10)`` texels (conventions, "RSM texels") as the three
        textures that :func:`run` reads, for injecting texels from the host
+
+Injection at depth (an extension)
+---------------------------------
+The paper injects each texel into the cell that holds its surface point. Next to a
+boundary that takes light out, a walk that starts one cell from it rarely reaches the far
+side (``docs/diffusion_mapping.md`` Sec. 7, term 2); diffusion theory puts the source
+of a normally incident beam one reduced mean free path deep. ``inject_depth = d`` moves
+each texel ``d`` reduced mean free paths inwards along ``-n_p``, read in the cell that
+holds ``x_p``::
+
+    offset(x_p) = inject_offset + d * mean_c 1 / sigma_t'_c(cell(x_p)),
+    sigma_t'_c = sigma_t,c (1 - a_c g_c)                                    (J1)
+
+with the medium resampled onto the LPV grid as the propagation resamples it
+(:func:`sslpv_gl.material.resample_medium`), before any calibration's ``sigma_scale``:
+the depth is the physical medium's. A cell with no medium (``sigma_t' = 0``) takes the
+mean of the cells that have one.
+
+Limits: one depth per cell, the mean over colours (the grid holds one position per point
+light, not one per colour); the move is along the normal, not along the refracted
+direction; a move deeper than the object (a thin part, a large ``d``) lands in a cell
+outside it, clamped into the grid, not reflected back.
 
 Why a 2D atlas
 --------------
@@ -42,7 +69,7 @@ import numpy as np
 from . import shaders as _sh
 from .grids import FORMATS, LOCAL_SIZE
 
-__all__ = ["build_program", "build_unflatten", "run", "texel_textures"]
+__all__ = ["build_program", "build_unflatten", "run", "texel_textures", "depth_offsets"]
 
 _TEXEL_ROW = 256        # texels per row of an uploaded texel texture
 
@@ -51,9 +78,9 @@ def build_program(ctx, warnings):
     """The injection program; its three texel samplers sit on units 0-2 for good."""
     prog = _sh.program(ctx, "inject.vert", "inject.frag")
     names = ["u_pos", "u_nrm", "u_flux", "u_width", "u_light", "u_bbox_min", "u_dx", "u_N",
-             "u_eta", "u_offset", "u_tiles_x", "u_atlas_size"]
+             "u_eta", "u_offset", "u_depth", "u_depth_on", "u_tiles_x", "u_atlas_size"]
     present = _sh.check_uniforms(prog, names, "inject", warnings)
-    for unit, name in enumerate(("u_pos", "u_nrm", "u_flux")):
+    for unit, name in enumerate(("u_pos", "u_nrm", "u_flux", "u_depth")):
         if name in present:
             prog[name].value = unit
     return prog
@@ -71,8 +98,26 @@ def build_unflatten(ctx, precision, warnings):
     return prog
 
 
-def run(ctx, prog, points, unflatten, grid, sources, bbox_min, bbox_max, eta, offset, dst):
+def depth_offsets(medium, N, depth, method="box"):
+    """Eq. (J1) without ``inject_offset``: ``depth`` reduced mean free paths of each cell's medium at grid ``N``
+    -> (N,N,N) float64, indexed ``[z, y, x]``, in scene units."""
+    from .material import resample_medium
+
+    st, a, g = resample_medium(medium, int(N), method)
+    red = st * (1.0 - a * g)
+    has = red > 0.0
+    count = has.sum(axis=-1)
+    total = np.where(has, 1.0 / np.where(has, red, 1.0), 0.0).sum(axis=-1)
+    ell = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+    if (count > 0).any():
+        ell = np.where(count > 0, ell, ell[count > 0].mean())
+    return float(depth) * ell
+
+
+def run(ctx, prog, points, unflatten, grid, sources, bbox_min, bbox_max, eta, offset, dst, depth=None):
     """Inject ``sources`` into ``grid``'s atlas and copy it into ``dst`` (three 3D textures).
+
+    ``depth``: None (the paper), or an (N,N,N) R32F texture of :func:`depth_offsets`, added to ``offset``.
 
     ``prog`` and ``unflatten`` come from :func:`build_program` and
     :func:`build_unflatten` (for ``grid.precision``); ``points`` is an empty
@@ -97,6 +142,9 @@ def run(ctx, prog, points, unflatten, grid, sources, bbox_min, bbox_max, eta, of
     set_(prog, "u_N", N)
     set_(prog, "u_eta", float(eta))
     set_(prog, "u_offset", float(offset))
+    set_(prog, "u_depth_on", int(depth is not None))
+    if depth is not None:
+        depth.use(3)
     set_(prog, "u_tiles_x", grid.tiles_x)
     set_(prog, "u_atlas_size", tuple(map(float, grid.atlas_size)))
     for texs, count, light_pos in sources:

@@ -27,7 +27,7 @@ PRECISIONS = ("fp32", "fp16")
 OUTSIDE = OUTSIDE_MODES
 #: The settings whose other values are extensions (options the paper does not have), with the paper's value of each.
 PAPER_SETTINGS = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
-                  "inject_offset": 0.0, "exitance": "isotropic"}
+                  "inject_offset": 0.0, "inject_depth": 0.0, "exitance": "isotropic"}
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
 EXTENSION_MAPPINGS = {"transport": "collision"}
 #: ``steps`` values other than a count: propagate to convergence, or solve the steady state.
@@ -79,6 +79,9 @@ class SSLPVParams:
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")
     inject_size: int = _p(256, "injection RSM resolution per light (paper: 256^2 texels used for injection)")
     inject_offset: float = _p(0.0, "move injected point lights this far inwards along -n (scene units; 0 = paper)")
+    inject_depth: float = _p(0.0, "move each injected point light this many reduced mean free paths inwards along -n, "
+                                  "1 / sigma_t' of the medium in its cell (mean over colours); adds to inject_offset "
+                                  "(an extension: 0 = paper), in [0, 16]")
     precision: str = _p("fp32", "storage of the SH grids: fp32 or fp16 (paper: 16-bit floats)")
     eta2: bool = _p(False, "divide outgoing radiance by eta^2 (radiance compression leaving a medium of index "
                            "eta; not in the paper's Eq. 4)")
@@ -124,6 +127,10 @@ class SSLPVParams:
         off = self.inject_offset
         if isinstance(off, bool) or not isinstance(off, (int, float)) or not off == off or abs(off) == float("inf"):
             bad("inject_offset", f"must be a finite number, got {off!r}", "change the value")
+        dep = self.inject_depth
+        if isinstance(dep, bool) or not isinstance(dep, (int, float)) or not 0.0 <= dep <= 16.0:
+            bad("inject_depth", f"must be a number in [0, 16] (reduced mean free paths), got {dep!r}",
+                "change the value")
         for name, lo, hi in (("sigma_scale", 0.0, 1e4), ("radiance_scale", 0.0, 1e4), ("converge_tol", 0.0, 1.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi or (name == "converge_tol"

@@ -248,14 +248,23 @@ class SSLPVRenderer:
 
     # ------------------------------------------------------------ stage 2: injection (Sec. 3.1, Eq. 1)
 
-    def _inject(self, grid, sources, scene, offset):
+    def _inject(self, grid, sources, scene, params):
         prog = self._program(("inject",))
         if self._points is None:
             self._points = self.ctx.vertex_array(prog, [])
         unflatten = self._program(("unflatten", grid.precision))
         med = scene.medium
-        injection.run(self.ctx, prog, self._points, unflatten, grid, sources, med.bbox_min, med.bbox_max,
-                      scene.boundary.eta, offset, grid.prop_a)
+        depth = None
+        if params.inject_depth:                   # Eq. (J1) of sslpv_gl.inject: the physical medium's depth per cell
+            cells = injection.depth_offsets(med, grid.N, params.inject_depth, params.resample)
+            depth = self.ctx.texture3d((grid.N,) * 3, 1, data=cells.astype(np.float32).tobytes(), dtype="f4")
+            depth.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        try:
+            injection.run(self.ctx, prog, self._points, unflatten, grid, sources, med.bbox_min, med.bbox_max,
+                          scene.boundary.eta, params.inject_offset, grid.prop_a, depth)
+        finally:
+            if depth is not None:
+                depth.release()
 
     @_current
     def inject(self, texels_list, light_positions, scene, params=None):
@@ -266,7 +275,7 @@ class SSLPVRenderer:
         for texels, lp in zip(texels_list, light_positions):
             parts, m = injection.texel_textures(self.ctx, texels)
             sources.append((parts, m, lp))
-        self._inject(grid, sources, scene, params.inject_offset)
+        self._inject(grid, sources, scene, params)
         for parts, _, _ in sources:
             for t in parts:
                 t.release()
@@ -383,7 +392,7 @@ class SSLPVRenderer:
         with stage("injection"):
             size = params.inject_size
             sources = [(texs, size * size, light.position) for texs, light in zip(maps, scene.lights)]
-            self._inject(grid, sources, scene, params.inject_offset)
+            self._inject(grid, sources, scene, params)
         return shadow_tex
 
     def _results(self, outputs, n_groups, t_wall, warnings):

@@ -13,7 +13,7 @@ Stages
    * - function
      - paper
      - parameters (defaults)
-   * - ``inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0)``
+   * - ``inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0, depth=None)``
      - Sec. 3.1, Eq. 1
      - ``texels`` (M, 10) RSM of ONE light; ``offset`` moves the virtual
        point light ``offset`` scene units inwards along ``-n_p`` (0 = paper)
@@ -72,7 +72,7 @@ def cell_index(points, bbox_min, bbox_max, N):
 
 # ------------------------------------------------------------------ injection
 
-def inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0):
+def inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0, depth=None):
     """Inject one light's RSM texels into an SH grid (Sec. 3.1) -> (N,N,N,3,4) float64.
 
     For each valid texel ``p``: ``w_i = normalize(x_p - light_pos)``,
@@ -81,6 +81,9 @@ def inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0):
     coefficients are ``(1/pi) T Phi_p clamped_cosine_coeffs(w_t)``. The lobe
     is added to the cell that contains ``x_p - offset * n_p`` (clamped into
     the grid); all texels of a cell sum to one point light at its centre.
+    ``depth`` (an extension): None, or an (N,N,N) grid ``[z, y, x]`` of further
+    inward moves (:func:`sslpv_gl.inject.depth_offsets`, Eq. (J1)), read in the
+    cell that contains ``x_p`` and added to ``offset``.
     """
     tex = np.asarray(texels, dtype=np.float64).reshape(-1, 10)
     N = int(N)
@@ -103,7 +106,11 @@ def inject(texels, light_pos, bbox_min, bbox_max, N, eta=1.0, offset=0.0):
     lobe = clamped_cosine_coeffs(w_t) / np.pi        # Eq. 1 per unit flux
     coeffs = (T[:, None] * phi)[:, :, None] * lobe[:, None, :]   # (M, 3, 4)
 
-    pos = x_p - float(offset) * n_p
+    off = np.full(x_p.shape[0], float(offset))
+    if depth is not None:
+        hi, hj, hk = cell_index(x_p, bbox_min, bbox_max, N).T
+        off = off + np.asarray(depth, dtype=np.float64)[hk, hj, hi]
+    pos = x_p - off[:, None] * n_p
     i, j, k = cell_index(pos, bbox_min, bbox_max, N).T
     np.add.at(grid, (k, j, i), coeffs)
     return grid

@@ -156,6 +156,8 @@ class TestBadInput:
         (["--family", "diffusion", "--exitance", "boundary"], "--exitance: exitance: boundary reads the exitance"),
         (["--family", "collision", "--outside", "extrapolated", "--exitance", "boundary"],
          "--exitance: exitance: boundary reads the exitance"),
+        (["--family", "collision", "--inject-depth", "-1"], "--inject-depth: inject_depth: must be a number in [0, 16]"),
+        (["--family", "collision", "--inject-depth", "deep"], "--inject-depth: inject-depth: 'deep' is not"),
         (["--family", "transport", "--outside", "vacuum"], "--outside: outside: mapping transport needs"),
         (["--family", "diffusion", "--scenes", "thin_ring"], "--scenes: scenes: 1 scene given"),
         (["--family", "diffusion", "--scenes", "thin_ring,nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
@@ -171,17 +173,17 @@ class TestBadInput:
         assert not out.exists() and list(tmp_path.iterdir()) == []
 
     def test_extension_flags_reach_the_fit(self, tmp_path, capsys, monkeypatch):
-        """--outside, --boundary-reflect, --phase-scaling and --exitance become the fit's renderer settings (no
+        """--outside, --boundary-reflect, --phase-scaling, --inject-depth and --exitance become the fit's renderer settings (no
         render here)."""
         import harness.calibration.run as cal_run
 
         seen = {}
         monkeypatch.setattr(cal_run, "run_calibrate", lambda **kw: seen.update(kw) or {"out": str(kw["out"])})
         code = main(["calibrate", "--json", "--family", "collision", "--out", str(tmp_path / "o"), "--outside",
-                     "interior", "--boundary-reflect", "rdr", "--phase-scaling", "delta-eddington"])
+                     "interior", "--boundary-reflect", "rdr", "--phase-scaling", "delta-eddington", "--inject-depth", "1"])
         assert code == 0, capsys.readouterr().err
         assert seen["settings"] == {"outside": "interior", "boundary_reflect": "rdr",
-                                    "phase_scaling": "delta-eddington"}
+                                    "phase_scaling": "delta-eddington", "inject_depth": 1.0}
         code = main(["calibrate", "--json", "--family", "diffusion", "--out", str(tmp_path / "o"), "--outside",
                      "extrapolated", "--exitance", "boundary"])
         assert code == 0, capsys.readouterr().err

@@ -35,6 +35,9 @@ def configure(sp):
     sp.add_argument("--exitance", metavar="MODE", help="renderer setting of the fit, an extension: isotropic | "
                     "boundary (diffusion theory's exitance at the extrapolated boundary; the diffusion family with "
                     "--outside extrapolated only; default: the family's, isotropic)")
+    sp.add_argument("--inject-depth", dest="inject_depth", metavar="MFP", help="renderer setting of the fit, an "
+                    "extension: inject each texel this many reduced mean free paths deep, in [0, 16] (sslpv_gl.inject "
+                    "Eq. (J1); default: the family's, 0)")
     add_progress(sp)
     add_no_cache(sp)
 
@@ -65,6 +68,8 @@ def run(args):
     settings = {}
     if args.skip is not None:
         settings["skip"] = _numbers("--skip", args.skip, int)[0]
+    if args.inject_depth is not None:
+        settings["inject_depth"] = _numbers("--inject-depth", args.inject_depth, float)[0]
     for key in ("outside", "boundary_reflect", "phase_scaling", "exitance"):
         if getattr(args, key) is not None:
             settings[key] = getattr(args, key)

@@ -5,7 +5,8 @@ An *extension* is an SSLPV option that the paper does not have (:data:`PAPER`: t
 the outside treatments ``interior``, ``absorb``, ``extrapolated`` and ``material`` (``outside``;
 ``docs/diffusion_mapping.md`` Sec. 8), the dielectric boundary's internal reflection (``boundary_reflect =
 rdr``, Sec. 10), delta-Eddington scaling of forward-peaked media (``phase_scaling``, Sec. 9), the
-``eta^2`` radiance compression (``eta2``), an inward injection offset (``inject_offset``) and the
+``eta^2`` radiance compression (``eta2``), an inward injection offset (``inject_offset``, in scene units, and
+``inject_depth``, in reduced mean free paths of the medium; :mod:`sslpv_gl.inject` Eq. (J1)) and the
 ``transport`` mapping (Sec. 11: one step is one cell of path), which is judged against the paper's
 ``collision`` (:data:`MAPPING_BASE`) and needs an outside treatment that takes light out. A
 configuration with any of them competes in its own family, named after its mapping's family and its
@@ -58,6 +59,8 @@ def extension_tags(params):
             continue
         if key == "inject_offset":
             tags.append(f"offset {v:g}")
+        elif key == "inject_depth":
+            tags.append(f"depth {v:g} mfp'")
         else:
             tags.append(NAMES.get(key, {}).get(v, str(v)))
     return tags

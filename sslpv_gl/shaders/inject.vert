@@ -14,6 +14,8 @@ uniform vec3  u_dx;             // cell size per axis
 uniform int   u_N;              // grid resolution
 uniform float u_eta;            // n_inside / n_outside
 uniform float u_offset;         // move the virtual light inwards along -n (0 = paper)
+uniform sampler3D u_depth;      // per cell: a further inward move (inject_depth reduced mean free paths)
+uniform int   u_depth_on;       // 0: no u_depth bound (the paper, and inject_depth = 0)
 uniform int   u_tiles_x;        // atlas tiles per row
 uniform vec2  u_atlas_size;     // atlas size in pixels
 
@@ -44,8 +46,13 @@ void main()
     v_g = lobe * phi.g;
     v_b = lobe * phi.b;
 
-    // ---- the cell containing x_p - offset n (clamped into the grid)
-    ivec3 cell = clamp(ivec3(floor((p.xyz - u_offset * n - u_bbox_min) / u_dx)), ivec3(0), ivec3(u_N - 1));
+    // ---- the cell containing x_p - offset n (clamped into the grid); the depth is that of x_p's own cell
+    float offset = u_offset;
+    if (u_depth_on != 0) {
+        ivec3 here = clamp(ivec3(floor((p.xyz - u_bbox_min) / u_dx)), ivec3(0), ivec3(u_N - 1));
+        offset += texelFetch(u_depth, here, 0).r;
+    }
+    ivec3 cell = clamp(ivec3(floor((p.xyz - offset * n - u_bbox_min) / u_dx)), ivec3(0), ivec3(u_N - 1));
     ivec2 pix = ivec2(cell.z % u_tiles_x, cell.z / u_tiles_x) * u_N + cell.xy;
     gl_Position = vec4((vec2(pix) + 0.5) / u_atlas_size * 2.0 - 1.0, 0.0, 1.0);
 }
