@@ -30,10 +30,11 @@ Five parts, each printing a table and writing ``OUT/<part>.json`` (and a plot fo
     form a shell; a hop between two neighbouring shell cells counts as bypass although part of each
     holds medium, so the share bounds the around-the-object light from above.
 ``backlit``
-    The back-lit deficit: back-lit, index-matched scenes (default ``backlit_slab``) at N = ``--grid``,
+    The back-lit deficit: back-lit, index-matched scenes (default ``backlit_slab`` and ``backlit_sphere``) at N = ``--grid``,
     ``steps = steady``, ``skip = 0``, for each mapping and outside mode, with the injection at the
-    surface (the paper) and one reduced mean free path inwards (``inject_offset = 1 / sigma_t'``, the
-    dipole's source depth, the mean over colours and cells): E(SSLPV) / E(reference) per colour
+    surface (the paper) and one reduced mean free path inwards (``inject_depth = 1``: ``1 / sigma_t'`` of each
+    texel's cell, the mean over colours, ``sslpv_gl.inject`` Eq. (J1); the dipole's source depth): E(SSLPV) /
+    E(reference) per colour
     channel over the pixels both cover. ``benchmarks/diffusion_bounded.py`` prints the same terms on
     a slab lattice.
 
@@ -329,22 +330,19 @@ def part_backlit(renderer, scenes, grid=32):
 
     rows = []
     print(f"N = {grid}, steps = steady, skip = 0")
-    print(f"{'scene':<16} {'mapping':<10} {'outside':<13} {'offset':>7}   E / E_ref (R, G, B)")
+    print(f"{'scene':<24} {'mapping':<10} {'outside':<13} {'depth':>5}   E / E_ref (R, G, B)")
     for name in scenes:
         scene = small_scene(name)
         ref, _ = load_case_reference(scene)
-        med = scene.medium
-        st, a, g = (np.asarray(v, dtype=np.float64) for v in (med.sigma_t, med.albedo, med.g))
-        offset = float(1.0 / np.mean(st * (1.0 - a) + st * a * (1.0 - g)))
         for mapping, outside in BACKLIT_CASES:
-            for off in (0.0, offset):
-                p = SSLPVParams(N=grid, steps="steady", mapping=mapping, outside=outside, skip=0, inject_offset=off)
+            for depth in (0.0, 1.0):
+                p = SSLPVParams(N=grid, steps="steady", mapping=mapping, outside=outside, skip=0, inject_depth=depth)
                 res = renderer.render(scene, p)
                 m = np.asarray(ref["mask"], bool) & res.mask
                 e = res.subsurface[m].sum(axis=0) / np.asarray(ref["subsurface"])[m].sum(axis=0)
-                rows.append({"scene": name, "mapping": mapping, "outside": outside, "inject_offset": off,
+                rows.append({"scene": name, "mapping": mapping, "outside": outside, "inject_depth": depth,
                              "energy_ratio": [float(x) for x in e]})
-                print(f"{name:<16} {mapping:<10} {outside:<13} {off:7.3f}   " + "  ".join(f"{v:.4f}" for v in e),
+                print(f"{name:<24} {mapping:<10} {outside:<13} {depth:5g}   " + "  ".join(f"{v:.4f}" for v in e),
                       flush=True)
     return rows
 
@@ -442,7 +440,7 @@ def main(argv=None):
         elif part == "bypass":
             rows = part_bypass(renderer, scenes, ks, args.mapping, args.grid)
         elif part == "backlit":
-            rows = part_backlit(renderer, scenes if args.scenes else ["backlit_slab"], args.grid)
+            rows = part_backlit(renderer, scenes if args.scenes else ["backlit_slab", "backlit_sphere"], args.grid)
         else:
             rows = {"outside": part_outside, "gap": part_gap}[part](renderer, scenes, args.out)
         with atomic_write(args.out / f"{part}.json") as tmp:
