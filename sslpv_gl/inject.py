@@ -75,7 +75,7 @@ _TEXEL_ROW = 256        # texels per row of an uploaded texel texture
 
 
 def build_program(ctx, warnings):
-    """The injection program; its three texel samplers sit on units 0-2 for good."""
+    """The injection program; its three texel samplers sit on units 0-2 for good, the depth grid on unit 3."""
     prog = _sh.program(ctx, "inject.vert", "inject.frag")
     names = ["u_pos", "u_nrm", "u_flux", "u_width", "u_light", "u_bbox_min", "u_dx", "u_N",
              "u_eta", "u_offset", "u_depth", "u_depth_on", "u_tiles_x", "u_atlas_size"]
