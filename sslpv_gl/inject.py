@@ -98,12 +98,14 @@ def build_unflatten(ctx, precision, warnings):
     return prog
 
 
-def depth_offsets(medium, N, depth, method="box"):
+def depth_offsets(medium, N, depth, method="box", resampled=None):
     """Eq. (J1) without ``inject_offset``: ``depth`` reduced mean free paths of each cell's medium at grid ``N``
-    -> (N,N,N) float64, indexed ``[z, y, x]``, in scene units."""
+    -> (N,N,N) float64, indexed ``[z, y, x]``, in scene units. ``resampled``: the medium's
+    :func:`~sslpv_gl.material.resample_medium` at ``N`` with ``method`` where the caller has it (as
+    :func:`~sslpv_gl.material.lpv_material` takes it)."""
     from .material import resample_medium
 
-    st, a, g = resample_medium(medium, int(N), method)
+    st, a, g = resampled if resampled is not None else resample_medium(medium, int(N), method)
     red = st * (1.0 - a * g)
     has = red > 0.0
     count = has.sum(axis=-1)

@@ -139,6 +139,7 @@ class SSLPVRenderer:
         self._points = None              # empty vertex array: injection points fetch their texel by id
         self._material_cache = {}
         self._geometry_cache = {}        # (scene hash, N, resample) -> (inside mask, resampled medium)
+        self._resampled_cache = {}       # (scene hash, N, resample) -> resample_medium(...)
         # Mesa llvmpipe answers the first GL_TIME_ELAPSED query of a context with
         # 0xFFFFFFFF ns (measured here); spend that one on a 1x1 clear.
         warm_fbo = self.ctx.simple_framebuffer((1, 1))
@@ -215,7 +216,7 @@ class SSLPVRenderer:
             geo = self._geometry_cache.get(geo_key)
             if geo is None:
                 geo = (grid_inside(scene.mesh, med.bbox_min, med.bbox_max, params.N),
-                       resample_medium(med, params.N, params.resample))
+                       self._resampled(scene, params.N, params.resample))
                 _put(self._geometry_cache, geo_key, geo, 4)
             inside, resampled = geo
             mat = lpv_material(med, inside, params.N, res.family, params.resample, params.outside, eta=eta,
@@ -226,6 +227,24 @@ class SSLPVRenderer:
             # A few entries: a sweep worker interleaves mappings and step counts of one grid.
             _put(self._material_cache, key, mat, 8)
         return mat
+
+    def _resampled(self, scene, N, method):
+        """:func:`~sslpv_gl.material.resample_medium` of the scene at ``N``, cached: the material and the injection
+        depth (Eq. (J1) of :mod:`sslpv_gl.inject`) read the same arrays."""
+        key = (scene.content_hash, N, method)
+        res = self._resampled_cache.get(key)
+        if res is None:
+            res = resample_medium(scene.medium, N, method)
+            _put(self._resampled_cache, key, res, 4)
+        return res
+
+    def _depth_cells(self, scene, params):
+        """Eq. (J1)'s per-cell depth for ``params.inject_depth`` (None at 0, the paper), built on the host before
+        the injection stage so that its timer holds the GL work alone."""
+        if not params.inject_depth:
+            return None
+        return injection.depth_offsets(scene.medium, params.N, params.inject_depth, params.resample,
+                                       resampled=self._resampled(scene, params.N, params.resample))
 
     # ------------------------------------------------------------ stage 1: RSM (Sec. 3.1)
 
@@ -248,15 +267,15 @@ class SSLPVRenderer:
 
     # ------------------------------------------------------------ stage 2: injection (Sec. 3.1, Eq. 1)
 
-    def _inject(self, grid, sources, scene, params):
+    def _inject(self, grid, sources, scene, params, cells=None):
+        """``cells``: :meth:`_depth_cells` (None: the paper's injection at the surface)."""
         prog = self._program(("inject",))
         if self._points is None:
             self._points = self.ctx.vertex_array(prog, [])
         unflatten = self._program(("unflatten", grid.precision))
         med = scene.medium
         depth = None
-        if params.inject_depth:                   # Eq. (J1) of sslpv_gl.inject: the physical medium's depth per cell
-            cells = injection.depth_offsets(med, grid.N, params.inject_depth, params.resample)
+        if cells is not None:
             depth = self.ctx.texture3d((grid.N,) * 3, 1, data=cells.astype(np.float32).tobytes(), dtype="f4")
             depth.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
         try:
@@ -275,7 +294,7 @@ class SSLPVRenderer:
         for texels, lp in zip(texels_list, light_positions):
             parts, m = injection.texel_textures(self.ctx, texels)
             sources.append((parts, m, lp))
-        self._inject(grid, sources, scene, params)
+        self._inject(grid, sources, scene, params, self._depth_cells(scene, params))
         for parts, _, _ in sources:
             for t in parts:
                 t.release()
@@ -389,10 +408,11 @@ class SSLPVRenderer:
         their texels into ``grid.prop_a``. Returns the shadow maps (the shading pass reads them)."""
         with stage("rsm"):
             maps, shadow_tex = self._render_rsm(scene, params, views)
+        cells = self._depth_cells(scene, params)
         with stage("injection"):
             size = params.inject_size
             sources = [(texs, size * size, light.position) for texs, light in zip(maps, scene.lights)]
-            self._inject(grid, sources, scene, params)
+            self._inject(grid, sources, scene, params, cells)
         return shadow_tex
 
     def _results(self, outputs, n_groups, t_wall, warnings):
