@@ -72,6 +72,8 @@ def test_hash_follows_content(tmp_path):
     (GOOD.replace("skip = 0", "skip = 0.5"), "settings.skip"),
     (GOOD.replace("eta2 = false", 'eta2 = "no"'), "settings.eta2"),
     (GOOD.replace("inject_offset = 0.0", "inject_offset = nan"), "settings.inject_offset"),
+    (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\ninject_depth = -1.0"), "settings.inject_depth"),
+    (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\ninject_depth = 17.0"), "settings.inject_depth"),
     (GOOD.replace("eta2 = false", "eta2 = false\nN = 32"), "settings.N"),
     (GOOD.replace('format = "sslpv-calibrated-mapping"', 'format = "other"'), "format"),
     (GOOD.replace("sigma_scale = 1.5", "sigma_scale = -1.0"), "budget[0].sigma_scale"),
