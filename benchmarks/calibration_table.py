@@ -31,13 +31,15 @@ def _cell(row):
 
 
 #: The renderer settings a calibration is named after where they are not its family's own.
-NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance", "inject_depth")
+NAMED_SETTINGS = ("outside", "phase_scaling", "boundary_reflect", "exitance", "inject_depth", "shade_depth")
 
 
 def _name_part(key, value):
-    """A setting's part of a page name: its value (``extrapolated``), or for a number the setting too (``depth1``)."""
-    if key == "inject_depth":
-        return f"depth{value:g}".replace(".", "p")
+    """A setting's part of a page name: its value (``extrapolated``), or for a number the setting too (``depth1``,
+    ``shade1``)."""
+    short = {"inject_depth": "depth", "shade_depth": "shade"}
+    if key in short:
+        return f"{short[key]}{value:g}".replace(".", "p")
     return str(value).replace("-", "_")
 
 

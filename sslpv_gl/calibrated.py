@@ -88,7 +88,7 @@ PREFIX = "calibrated:"
 #: fitted scales, with their types: a calibrated file records each, a render must match it.
 SETTINGS = {"skip": int, "outside": str, "resample": str, "lookup": str, "inject_size": int,
             "inject_offset": float, "precision": str, "eta2": bool, "phase_scaling": str,
-            "boundary_reflect": str, "exitance": str, "inject_depth": float}
+            "boundary_reflect": str, "exitance": str, "inject_depth": float, "shade_depth": float}
 #: Fitted scales must lie in this range (a wider one means the fit failed).
 SCALE_RANGE = (1e-4, 1e4)
 #: A version 3 form's constants: |a0|, |b0| at most this. They are the scales at all terms 0, which no
@@ -198,6 +198,7 @@ class _Settings(InputModel):
     boundary_reflect: Annotated[str, Field(examples=["none"])] = "none"  # files that predate it: the paper's
     exitance: Annotated[str, Field(examples=["isotropic"])] = "isotropic"  # files that predate it: Eq. (21)'s
     inject_depth: Annotated[float, Field(ge=0.0, le=16.0, examples=[0.0])] = 0.0   # files that predate it: the paper's
+    shade_depth: Annotated[float, Field(ge=0.0, le=4.0, examples=[0.0])] = 0.0     # files that predate it: the paper's
 
 
 _Coef = Annotated[float, Field(examples=[0.0])]        # finite (InputModel refuses NaN and infinities)
@@ -313,6 +314,7 @@ def _parse(path, data, families):
     settings = f.settings.model_dump()
     settings["inject_offset"] = float(settings["inject_offset"])
     settings["inject_depth"] = float(settings["inject_depth"])
+    settings["shade_depth"] = float(settings["shade_depth"])
     return Calibrated(path=path, sha256=sha, family=f.family, budgets=budgets, fit=f.fit, settings=settings)
 
 

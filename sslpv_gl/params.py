@@ -27,7 +27,7 @@ PRECISIONS = ("fp32", "fp16")
 OUTSIDE = OUTSIDE_MODES
 #: The settings whose other values are extensions (options the paper does not have), with the paper's value of each.
 PAPER_SETTINGS = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
-                  "inject_offset": 0.0, "inject_depth": 0.0, "exitance": "isotropic"}
+                  "inject_offset": 0.0, "inject_depth": 0.0, "exitance": "isotropic", "shade_depth": 0.0}
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
 EXTENSION_MAPPINGS = {"transport": "collision"}
 #: ``steps`` values other than a count: propagate to convergence, or solve the steady state.
@@ -75,6 +75,9 @@ class SSLPVParams:
                                     "extrapolated boundary, J = phi / (2 A); diffusion with outside extrapolated "
                                     "only; sslpv_gl.bounded Eq. (D5))")
     lookup: str = _p("cell", "shading lookup of the accumulation grid: cell (texelFetch) or trilinear")
+    shade_depth: float = _p(0.0, "read the accumulation grid this many cells inwards of the shaded point along -n "
+                                 "(an extension: 0 = the paper, the point's own cell; sslpv_gl.shade Eq. (S1)), "
+                                 "in [0, 4]")
     skip: int = _p(2, "first propagation steps not accumulated (paper Sec. 4: 2), in [0, steps]")
     rsm_size: int = _p(1024, "shadow-map resolution per light for direct-light visibility (paper: 1024^2)")
     inject_size: int = _p(256, "injection RSM resolution per light (paper: 256^2 texels used for injection)")
@@ -131,6 +134,9 @@ class SSLPVParams:
         if isinstance(dep, bool) or not isinstance(dep, (int, float)) or not 0.0 <= dep <= 16.0:
             bad("inject_depth", f"must be a number in [0, 16] (reduced mean free paths), got {dep!r}",
                 "change the value")
+        sd = self.shade_depth
+        if isinstance(sd, bool) or not isinstance(sd, (int, float)) or not 0.0 <= sd <= 4.0:
+            bad("shade_depth", f"must be a number in [0, 4] (cells), got {sd!r}", "change the value")
         for name, lo, hi in (("sigma_scale", 0.0, 1e4), ("radiance_scale", 0.0, 1e4), ("converge_tol", 0.0, 1.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi or (name == "converge_tol"

@@ -24,6 +24,21 @@ define of the program and sets the grid textures' filter. Direct reflection is
 the GGX reflection half of a rough dielectric. An index-matched boundary and a
 smooth one (roughness 0, whose mirror image of a point light the pinhole never
 sees) reflect nothing (``u_n_lights = 0``), as in the reference.
+
+Where the grid is read. The paper reads "the point light intensities of the boundary grid cells" (Sec. 3.3)
+at the shaded point ``x_o`` itself. ``params.shade_depth = d`` (an extension, in cells; 0 = the paper) reads
+them ``d`` cells inwards along the normal instead:
+
+    q(x_o) = x_o - d dx n(x_o),     dx = the grid's cell size                                   (S1)
+
+A boundary cell holds a fraction of medium that depends on where the surface cuts it, so the point's own
+cell can be mostly outside the object: under ``outside = interior`` such a cell holds only the light that
+has just stepped out of the medium, not the light inside it, and the lit side reads in a speckle of the
+grid's cells; under ``vacuum`` it also holds light that left the object elsewhere and ran round it. Read ``d = 1`` cell deep under a surface that is flat across a cell,
+the cell read has its centre inside the object, at least ``(1 - sqrt(3)/2) dx`` deep.
+Limits: the move is along the interpolated normal, so a part of the object thinner than ``d dx`` is read
+from its far side's cells or from outside it; the read is clamped to the grid's edge as before; the radiance
+estimate of Eqs. 5-7 is unchanged (it takes the deeper cell's intensities for those behind the surface).
 """
 
 from __future__ import annotations
@@ -41,8 +56,8 @@ def build_program(ctx, lookup, warnings):
     prog = _sh.program(ctx, "shade.vert", "shade.frag",
                        {"LOOKUP_TRILINEAR": int(lookup == "trilinear"), "MAX_LIGHTS": MAX_LIGHTS})
     names = ["u_view_proj", "u_acc_r", "u_acc_g", "u_acc_b", "u_bbox_min", "u_bbox_size", "u_N",
-             "u_area", "u_eta", "u_sub_scale", "u_alpha", "u_cam_pos", "u_n_lights", "u_light_pos", "u_light_I",
-             "u_light_vp", "u_shadow", "u_shadow_size", "u_shadow_texel"]
+             "u_area", "u_eta", "u_sub_scale", "u_shade_shift", "u_alpha", "u_cam_pos", "u_n_lights", "u_light_pos",
+             "u_light_I", "u_light_vp", "u_shadow", "u_shadow_size", "u_shadow_texel"]
     if lookup == "trilinear":
         names.remove("u_N")                     # only the cell lookup needs N
     present = _sh.check_uniforms(prog, names, f"shade[{lookup}]", warnings)
@@ -80,6 +95,7 @@ def run(ctx, prog, vao, target, scene, params, grid, views, shadow_tex, centre, 
     set_(prog, "u_bbox_size", tuple(map(float, size)))
     set_(prog, "u_N", params.N)
     set_(prog, "u_area", dx * dx)                   # A = dx^2, the area light of Eq. 5
+    set_(prog, "u_shade_shift", float(params.shade_depth) * dx)     # Eq. (S1)
     set_(prog, "u_eta", float(b.eta))
     set_(prog, "u_sub_scale", 1.0 / (float(b.eta) ** 2) if params.eta2 else 1.0)
     set_(prog, "u_alpha", float(b.roughness))

@@ -21,10 +21,11 @@ Stages
      - Sec. 3.2, Eq. 3, Sec. 4
      - transfer rule of ``docs/conventions.md``; accumulate steps ``k > skip``;
        ``emit`` (0/1 per cell) makes sink cells (``sslpv_gl.boundary``)
-   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False, radiance_scale=None)``
+   * - ``shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0, view_dirs=None, eta2=False, radiance_scale=None, shade_depth=0.0)``
      - Sec. 3.3, Eq. 4-7
      - ``"cell"`` or ``"trilinear"`` coefficient lookup; ``eta2`` adds the
-       ``1/eta^2`` radiance factor (not in the paper)
+       ``1/eta^2`` radiance factor (not in the paper); ``shade_depth`` reads
+       the grid that many cells inwards (``sslpv_gl.shade`` Eq. (S1); not in the paper)
 
 Grids are ``(N, N, N, 3, 4)`` indexed ``[z, y, x, colour, coeff]`` with the
 coefficient order ``(c00, c1-1, c10, c11)``.
@@ -242,7 +243,7 @@ def sample_trilinear(grid, points, bbox_min, bbox_max):
 
 
 def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=1.0,
-                 view_dirs=None, eta2=False, radiance_scale=None):
+                 view_dirs=None, eta2=False, radiance_scale=None, shade_depth=0.0):
     """Subsurface radiance leaving surface points (Sec. 3.3) -> (P, 3) float64.
 
     Eq. 4 with the area-light estimate of Eq. 5-7 in the two-band form of
@@ -257,6 +258,8 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
     when ``eta == 1``). ``radiance_scale`` (N,N,N,3), default 1, multiplies
     each cell's coefficients before the lookup (``docs/diffusion_mapping.md``
     Eq. (21); a calibrated global factor), as ``scale.comp`` does.
+    ``shade_depth`` (cells) reads the grid at ``x - shade_depth dx n`` instead of
+    at ``x`` (:mod:`sslpv_gl.shade` Eq. (S1); 0 = the paper).
     """
     accum = np.asarray(accum, dtype=np.float64)
     if radiance_scale is not None:
@@ -265,6 +268,8 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
+    _, dx = _grid_geometry(bbox_min, bbox_max, N)
+    pts = pts - float(shade_depth) * dx[0] * nrm         # Eq. (S1)
     if lookup == "cell":
         i, j, k = cell_index(pts, bbox_min, bbox_max, N).T
         c = accum[k, j, i]                           # (P, 3, 4)
@@ -273,7 +278,6 @@ def shade_points(accum, bbox_min, bbox_max, points, normals, lookup="cell", eta=
     else:
         raise ValueError(f"unknown lookup '{lookup}'; use 'cell' or 'trilinear'")
 
-    _, dx = _grid_geometry(bbox_min, bbox_max, N)
     radiance = hemisphere_radiance(c, nrm[:, None, :], dx[0] ** 2)
 
     if eta == 1.0:

@@ -74,6 +74,8 @@ def test_hash_follows_content(tmp_path):
     (GOOD.replace("inject_offset = 0.0", "inject_offset = nan"), "settings.inject_offset"),
     (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\ninject_depth = -1.0"), "settings.inject_depth"),
     (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\ninject_depth = 17.0"), "settings.inject_depth"),
+    (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\nshade_depth = -0.5"), "settings.shade_depth"),
+    (GOOD.replace("inject_offset = 0.0", "inject_offset = 0.0\nshade_depth = 4.5"), "settings.shade_depth"),
     (GOOD.replace("eta2 = false", "eta2 = false\nN = 32"), "settings.N"),
     (GOOD.replace('format = "sslpv-calibrated-mapping"', 'format = "other"'), "format"),
     (GOOD.replace("sigma_scale = 1.5", "sigma_scale = -1.0"), "budget[0].sigma_scale"),

@@ -155,7 +155,7 @@ class TestFile:
         assert (b.sigma_scale, b.radiance_scale) == (math.exp(SIGMA[0]), math.exp(RADIANCE[0]))
         assert b.form == Form(TERMS, tuple(SIGMA[1:]), tuple(RADIANCE[1:]), 8)
         assert cal.budget(32, "steady").form.sigma == tuple(SIGMA[1:5]) + (0.0,)
-        assert cal.settings == SETTINGS | {"exitance": "isotropic", "inject_depth": 0.0}   # predating them: the paper's
+        assert cal.settings == SETTINGS | {"exitance": "isotropic", "inject_depth": 0.0, "shade_depth": 0.0}   # predating them: the paper's
 
     def test_terms_a_budget_uses(self):
         assert "ln_extent_per_step" in budget_terms(8) and "ln_extent_per_step" not in budget_terms("steady")
@@ -405,7 +405,7 @@ class TestSources:
         from harness.calibration.form_files import read_sources as _sources
 
         cal, settings = _sources([self.folder(tmp_path, "a"), self.folder(tmp_path, "b", grid=16)])
-        assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS | {"exitance": "isotropic", "inject_depth": 0.0}
+        assert cal["budgets"] == [[32, 8], [16, 8]] and settings == SETTINGS | {"exitance": "isotropic", "inject_depth": 0.0, "shade_depth": 0.0}
         assert cal["results"]["N=16 steps=8"]["source"] == str(tmp_path / "b")
 
     @pytest.mark.parametrize("other, field", [({"grid": 32}, "budgets"), ({"family": "diffusion", "grid": 16}, "family"),

@@ -38,6 +38,9 @@ def configure(sp):
     sp.add_argument("--inject-depth", dest="inject_depth", metavar="MFP", help="renderer setting of the fit, an "
                     "extension: inject each texel this many reduced mean free paths deep, in [0, 16] (sslpv_gl.inject "
                     "Eq. (J1); default: the family's, 0)")
+    sp.add_argument("--shade-depth", dest="shade_depth", metavar="CELLS", help="renderer setting of the fit, an "
+                    "extension: read the grid this many cells inwards of each shaded point, in [0, 4] (sslpv_gl.shade "
+                    "Eq. (S1); default: the family's, 0)")
     add_progress(sp)
     add_no_cache(sp)
 
@@ -70,6 +73,8 @@ def run(args):
         settings["skip"] = _numbers("--skip", args.skip, int)[0]
     if args.inject_depth is not None:
         settings["inject_depth"] = _numbers("--inject-depth", args.inject_depth, float)[0]
+    if args.shade_depth is not None:
+        settings["shade_depth"] = _numbers("--shade-depth", args.shade_depth, float)[0]
     for key in ("outside", "boundary_reflect", "phase_scaling", "exitance"):
         if getattr(args, key) is not None:
             settings[key] = getattr(args, key)

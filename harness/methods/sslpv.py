@@ -22,7 +22,7 @@ CLI_TO_FIELD = {
     "grid": "N", "steps": "steps", "mapping": "mapping", "resample": "resample", "outside": "outside",
     "phase_scaling": "phase_scaling", "boundary_reflect": "boundary_reflect",
     "lookup": "lookup", "skip": "skip", "inject_offset": "inject_offset",
-    "inject_depth": "inject_depth", "precision": "precision",
+    "inject_depth": "inject_depth", "shade_depth": "shade_depth", "precision": "precision",
     "rsm_size": "rsm_size", "inject_size": "inject_size", "eta2": "eta2",
     "sigma_scale": "sigma_scale", "radiance_scale": "radiance_scale", "converge_tol": "converge_tol",
     "max_steps": "max_steps", "exitance": "exitance",
