@@ -34,8 +34,9 @@ them ``d`` cells inwards along the normal instead:
 A boundary cell holds a fraction of medium that depends on where the surface cuts it, so the point's own
 cell can be mostly outside the object: under ``outside = interior`` such a cell holds only the light that
 has just stepped out of the medium, not the light inside it, and the lit side reads in a speckle of the
-grid's cells; under ``vacuum`` it also holds light that left the object elsewhere and ran round it. Read ``d = 1`` cell deep under a surface that is flat across a cell,
-the cell read has its centre inside the object, at least ``(1 - sqrt(3)/2) dx`` deep.
+grid's cells; under ``vacuum`` it also holds light that left the object elsewhere and ran round it.
+Read ``d = 1`` cell deep under a surface that is flat across a cell, the cell read has its centre inside the
+object, at least ``(1 - sqrt(3)/2) dx`` deep.
 Limits: the move is along the interpolated normal, so a part of the object thinner than ``d dx`` is read
 from its far side's cells or from outside it; the read is clamped to the grid's edge as before; the radiance
 estimate of Eqs. 5-7 is unchanged (it takes the deeper cell's intensities for those behind the surface).
