@@ -228,3 +228,61 @@ def test_the_in_sample_median_splits_form_from_generalisation(tmp_path, inside, 
     both = "N=32 steps=32, N=32 steps=steady"
     assert (f"At {both} the best misses the relMSE limit even in sample" in said) == (inside > 0.05)
     assert (f"At {both} it meets the relMSE limit in sample and misses it held out" in said) == (inside < 0.05)
+
+
+def _second(tmp_path, held, steady_median, k32_median=0.5):
+    """A second calibration of the study, ``other``, with its own report and label; its candidate's medians."""
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "calibrated.toml").write_text("")
+    (other / "calibration.json").write_text(json.dumps(_report(held)))
+    cal = {"file": str(other / "calibrated.toml"), "label": "calibrated collision (interior)",
+           "report": str(other / "calibration.json")}
+    cand = {"folder": str(other), "form": True, "budgets": {"N=32 steps=32": {"median_held_out_relmse": k32_median},
+                                                            "N=32 steps=steady": {"median_held_out_relmse":
+                                                                                  steady_median}}}
+    return cal, cand
+
+
+def test_the_best_at_one_budget_alone_is_judged_where_it_is_not_the_winner(tmp_path):
+    """A candidate with a lower median than the winner at the steady state only is judged there, from its own
+    calibration.json and the study's rows under its own label; at K = 32, where the winner is lowest, nothing."""
+    from harness.study.present import best_at_budget_table
+
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    held = {s: (1.0, 0.02) for s in FITTED}
+    held["im0"] = held["im1"] = (0.3, 0.02)                     # two fitted scenes out: its group is not met
+    cal, cand = _second(tmp_path, held, steady_median=0.005)
+    data = json.loads(sel.read_text())
+    data["candidates"].append(cand)
+    sel.write_text(json.dumps(data))
+    rows = _rows() + [dict(_row(s, k, 1.1), family=cal["label"]) for s in ("glass", "backlit") for k in (32, "steady")]
+    t = target(rows, cals + [cal], BUDGET, _scenes(), selection=sel)
+    assert [e["budget"] for e in t["best_at_budget"]] == ["N=32 steps=steady"]
+    e = t["best_at_budget"][0]
+    assert e["calibration"] == str(tmp_path / "other") and e["label"] == cal["label"]
+    groups = {g["group"]: g for g in e["judged"]["groups"]}
+    assert groups["index-matched, fitted (held out)"]["in_range"] == 3 and e["judged"]["met"] is False
+    assert groups["dielectric"]["scenes"][0]["energy_ratio"] == 1.1          # the study's render of its own file
+    assert e["judged"]["relmse"]["median"] == pytest.approx(0.02)
+    assert t["met"] is True                                     # the winner's own verdict is unchanged
+    intro, table = best_at_budget_table(t)
+    assert "`" + str(tmp_path / "other") + "`" in intro and len(table) == 5
+    assert all(r[0] == "N=32 steps=steady" for r in table)
+
+
+def test_no_best_at_one_budget_where_the_winner_is_lowest_or_the_study_lacks_it(tmp_path):
+    from harness.study.present import best_at_budget_table
+
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)
+    assert t["best_at_budget"] == [] and best_at_budget_table(t) == (None, [])
+    _, cand = _second(tmp_path, {s: (1.0, 0.02) for s in FITTED}, steady_median=0.005)
+    data = json.loads(sel.read_text())
+    data["candidates"].append(cand)
+    sel.write_text(json.dumps(data))
+    t = target(_rows(), cals, BUDGET, _scenes(), selection=sel)           # the study did not render `other`
+    assert t["best_at_budget"] == [{"budget": "N=32 steps=steady", "calibration": str(tmp_path / "other"),
+                                    "why": f"{tmp_path / 'other'} is not one of the study's calibrations"}]
+    intro, table = best_at_budget_table(t)
+    assert table == [["N=32 steps=steady", "–", "–", t["best_at_budget"][0]["why"], "no"]]

@@ -17,8 +17,8 @@ from pathlib import Path
 from harness import paths
 from harness.io.atomic import atomic_write
 from harness.methods.extension_outside import CHOICE, write_choice
-from harness.study.present import (extension_lines, extension_rows, headline_rows, judging_methods, limit_lines,
-                                   target_table)
+from harness.study.present import (best_at_budget_table, extension_lines, extension_rows, headline_rows,
+                                   judging_methods, limit_lines, target_table)
 
 DOC = paths.REPO / "docs" / "results.md"
 FIGURES = ("pareto", "refine_k", "refine_n")
@@ -87,6 +87,11 @@ def write_docs(built, out, doc=DOC, choice=None):
             lines += ["| " + " | ".join(r) + " |" for r in rows]
             lines.append("")
         lines.append(verdict)
+        intro, rows = best_at_budget_table(built["target"])
+        if intro:
+            lines += ["", "### The best at one budget alone", "", intro, "",
+                      "| budget | target | needed | measured | met |", "|---|---|---|---|---|"]
+            lines += ["| " + " | ".join(r) + " |" for r in rows]
     lines += ["", "## What limits SSLPV here", ""]
     for scene in head["scenes"]:
         if scene in built["limits"]:

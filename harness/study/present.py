@@ -175,6 +175,60 @@ def _yes(ok):
     return "**yes**" if ok else "no"
 
 
+def _budget_rows(b):
+    """One judged budget of the target as ``[budget, target, needed, value, met]`` rows."""
+    from harness.study.target import RELMSE_FACTOR
+
+    name = b["budget"]
+    if "why" in b:
+        return [[name, "–", "–", b["why"], "no"]]
+    rows = []
+    for gr in b["groups"]:
+        out = ", ".join(f"{x['scene']} {g(x['energy_ratio'])}" + (" (missing)" if x["source"] == "missing" else "")
+                        for x in gr["outside"])
+        value = f"{gr['in_range']} in range" + (f"; outside: {out}" if out else "") if gr["of"] else "no scene"
+        rows.append([name, f"energy: {gr['group']}", f"{gr['need']} of {gr['of']}", value, _yes(gr["met"])])
+    r = b["relmse"]
+    need = (f"≤ {g(r['limit'])} ({g(RELMSE_FACTOR)} × {r['baseline']} {g(r['baseline_median'])})"
+            if r["limit"] is not None else "no scalar calibration to compare")
+    rows.append([name, "median held-out relMSE", need, g(r["median"]), _yes(r["met"])])
+    if r.get("in_sample") is not None and r["limit"] is not None:
+        rows.append([name, "median in-sample relMSE: the same calibration fitted on every scene, each rendered "
+                     "with it; above the limit, the form misses even on the scenes it saw; below, the held-out "
+                     "excess over it is the generalisation to an unseen scene", f"≤ {g(r['limit'])}",
+                     g(r["in_sample"]), "within" if r["in_sample"] <= r["limit"] else "**above**"])
+    fl = r.get("floor")
+    if fl is not None and r["limit"] is not None:
+        varying = ", ".join(fl["varying"]) or "none"
+        rows.append([name, "floor of the family: median relMSE, each fitted scene at its own best scales per "
+                     f"colour channel (`{fl['file']}`; per scene, one pair: {g(fl['median_scalar'])}); the least "
+                     "any calibration of the family can reach, with the scenes whose floor bounds no form (terms "
+                     f"that vary on the grid, or a least at the scan's end: {varying}) taken as 0",
+                     f"≤ {g(r['limit'])} to be reachable",
+                     f"floor {g(fl['median'])}; least {g(fl['bound'])}",
+                     "reachable" if fl["bound"] <= r["limit"] else "**out of reach**"])
+    return rows
+
+
+def best_at_budget_table(t):
+    """The target's ``best_at_budget`` (:func:`harness.study.target.target`) as ``(intro, rows)``, or ``(None, [])``
+    where the winner is also the best at every judged budget: the same rows as :func:`target_table`, per budget for
+    the candidate with the lowest median held-out relMSE there."""
+    entries = t.get("best_at_budget") or []
+    if "why" in t or not entries:
+        return None, []
+    names = ", ".join(f"{e['budget']}: `{e['calibration']}`" + (f" ({e['label']})" if "label" in e else "")
+                      for e in entries)
+    intro = ("The same target for the calibration with the lowest median held-out relMSE at one budget alone, where "
+             f"that is not the best over every budget ({names}; `selection.json` ranks every candidate at each "
+             "budget). A calibrated file carries one set of renderer settings, so this is the best the committed "
+             "calibrations reach at that budget, not a mapping the selection could combine with the winner.")
+    rows = []
+    for e in entries:
+        rows += [[e["budget"], "–", "–", e["why"], "no"]] if "why" in e else _budget_rows(e["judged"])
+    return intro, rows
+
+
 def target_table(t):
     """The calibration target (:func:`harness.study.target.target`) as ``(intro, rows, verdict)``: ``rows`` are
     ``[budget, target, needed, value, met]`` text cells; ``intro`` is None when no target was judged."""
@@ -190,36 +244,7 @@ def target_table(t):
              "leave-one-scene-out validation rendered them), on every dielectric scene and on every back-lit "
              "homogeneous scene it was not fitted on (the study's renders of the committed file); and a median "
              f"held-out relMSE at most {g(RELMSE_FACTOR)} × the lowest among the selection's scalar calibrations.")
-    rows = []
-    for b in t["budgets"]:
-        name = b["budget"]
-        if "why" in b:
-            rows.append([name, "–", "–", b["why"], "no"])
-            continue
-        for gr in b["groups"]:
-            out = ", ".join(f"{x['scene']} {g(x['energy_ratio'])}" + (" (missing)" if x["source"] == "missing" else "")
-                            for x in gr["outside"])
-            value = f"{gr['in_range']} in range" + (f"; outside: {out}" if out else "") if gr["of"] else "no scene"
-            rows.append([name, f"energy: {gr['group']}", f"{gr['need']} of {gr['of']}", value, _yes(gr["met"])])
-        r = b["relmse"]
-        need = (f"≤ {g(r['limit'])} ({g(RELMSE_FACTOR)} × {r['baseline']} {g(r['baseline_median'])})"
-                if r["limit"] is not None else "no scalar calibration to compare")
-        rows.append([name, "median held-out relMSE", need, g(r["median"]), _yes(r["met"])])
-        if r.get("in_sample") is not None and r["limit"] is not None:
-            rows.append([name, "median in-sample relMSE: the same calibration fitted on every scene, each rendered "
-                         "with it; above the limit, the form misses even on the scenes it saw; below, the held-out "
-                         "excess over it is the generalisation to an unseen scene", f"≤ {g(r['limit'])}",
-                         g(r["in_sample"]), "within" if r["in_sample"] <= r["limit"] else "**above**"])
-        fl = r.get("floor")
-        if fl is not None and r["limit"] is not None:
-            varying = ", ".join(fl["varying"]) or "none"
-            rows.append([name, "floor of the family: median relMSE, each fitted scene at its own best scales per "
-                         f"colour channel (`{fl['file']}`; per scene, one pair: {g(fl['median_scalar'])}); the least "
-                         "any calibration of the family can reach, with the scenes whose floor bounds no form (terms "
-                         f"that vary on the grid, or a least at the scan's end: {varying}) taken as 0",
-                         f"≤ {g(r['limit'])} to be reachable",
-                         f"floor {g(fl['median'])}; least {g(fl['bound'])}",
-                         "reachable" if fl["bound"] <= r["limit"] else "**out of reach**"])
+    rows = [r for b in t["budgets"] for r in _budget_rows(b)]
     verdict = f"Target met at every budget: {_yes(t['met'])}. Where a scene misses, *What limits SSLPV here* gives the measured decomposition."
     floors = [(b["budget"], b["relmse"]) for b in t["budgets"] if "why" not in b and b["relmse"].get("floor")
               and b["relmse"]["limit"] is not None]

@@ -29,8 +29,8 @@ from harness.study import figures as figs
 from harness.study.extensions import default_outside, effects, is_extension
 from harness.study.headline import _Images, headline
 from harness.study.limits import limits
-from harness.study.present import (budget_rows, extension_lines, extension_rows, headline_rows, judging_methods,
-                                   limit_lines, target_table)
+from harness.study.present import (best_at_budget_table, budget_rows, extension_lines, extension_rows,
+                                   headline_rows, judging_methods, limit_lines, target_table)
 from harness.study.spec import load_study
 from harness.study.target import scene_info, target
 from harness.study.table import rows_of, write_csv, write_parquet
@@ -143,7 +143,7 @@ def build_outputs(out, study, summary, command, key=None):
                  headline_rows=headline_rows(head, study["metrics"]), budget_rows=budget_rows(head, study["metrics"]),
                  limit_lines=[(s, limit_lines(lims[s])) for s in head["scenes"] if s in lims],
                  extension_rows=extension_rows(ext, study["metrics"]), extension_lines=extension_lines(ext),
-                 target_table=target_table(tgt))
+                 target_table=target_table(tgt), best_at_budget=best_at_budget_table(tgt))
     # last: its inputs_key declares the folder complete (harness.study.memo), so it follows every other output
     with atomic_write(out / "study.json") as tmp:
         tmp.write_text(json.dumps(info, indent=1, default=str))

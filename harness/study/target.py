@@ -25,6 +25,10 @@ form (its terms vary over the grid, or its least lies at an end of the scan befo
 fitted scene the floor has no row for, taken as 0. No calibration of the family, scalar or form, held out or in sample, has a median below
 ``bound``; where ``bound`` exceeds (T4)'s limit, (T4) is out of reach for the family.
 
+The winner is chosen over every budget (``calibrate-best``: the geometric mean of its medians). At a budget where
+another candidate has the lower median held-out relMSE, that candidate is judged by the same rules beside it
+(``best_at_budget``): the settings that reproduce the suite best at that budget alone.
+
 A scene of (T2) or (T3) that the calibration was fitted on is taken from its held-out validation like
 (T1); one it was not fitted on is the study's own render with the committed file, held out by
 construction (no fit saw it). A scene with neither is ``missing`` and its group is not met.
@@ -142,10 +146,59 @@ def scene_info(names):
     return out
 
 
+def _judge(cal, sel, rows, scenes, grid, k):
+    """One budget of the target (module docstring) for the study's calibration entry ``cal``: ``{"budget", "K",
+    "groups", "relmse", "met"}``, or ``{"budget", "why", "met": False}`` where its file has no such budget."""
+    report = json.loads(Path(cal["report"]).read_text())
+    fitted = list(report.get("scenes") or [])
+    index_matched = [s for s in fitted if not scenes.get(s, {}).get("dielectric")]
+    dielectric = sorted(s for s, i in scenes.items() if i.get("dielectric"))
+    backlit = sorted(s for s, i in scenes.items() if {"back-lit", "homogeneous"} <= set(i.get("tags", ()))
+                     and s not in fitted)
+    key = f"N={grid} steps={k}"
+    res = (report.get("results") or {}).get(key)
+    if res is None:
+        return {"budget": key, "why": f"the calibration has no budget {key}", "met": False}
+    held = res.get("held_out") or {}
+    groups = [
+        _group("index-matched, fitted (held out)",
+               [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in index_matched],
+               max(len(index_matched) - SPARE, 0)),
+        _group("dielectric", [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in dielectric],
+               len(dielectric)),
+        _group("back-lit homogeneous, not fitted",
+               [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in backlit], len(backlit)),
+    ]
+    median = _median_relmse(held, fitted)
+    base = _baseline(sel, key)
+    relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
+              "limit": RELMSE_FACTOR * base[1] if base else None}
+    relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
+    relmse["in_sample"] = _median_relmse(res.get("in_sample") or {}, fitted)
+    relmse["floor"] = _floor(cal["report"], key, fitted)
+    return {"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
+            "met": all(g["met"] for g in groups) and relmse["met"]}
+
+
+def _best_at(sel, key):
+    """The selection's candidate folder with the lowest median held-out relMSE at ``key`` (scalar or form), or None."""
+    best = None
+    for c in sel.get("candidates", []):
+        m = (c.get("budgets") or {}).get(key, {}).get("median_held_out_relmse")
+        if m is not None and (best is None or m < best[1]):
+            best = (c["folder"], m)
+    return best[0] if best else None
+
+
 def target(rows, calibrations, budget, scenes, selection=SELECTION):
-    """The target of the module docstring: ``{"selection", "calibration", "label", "file", "budgets": [...], "met"}``, or
-    ``{"why": ...}`` when it cannot be judged. ``scenes``: ``{scene: {"dielectric": bool, "tags": set}}``
-    of the study's scenes; ``rows``: the study's rows (:mod:`harness.study.table`)."""
+    """The target of the module docstring: ``{"selection", "calibration", "label", "file", "budgets": [...], "met",
+    "best_at_budget": [...]}``, or ``{"why": ...}`` when it cannot be judged. ``scenes``: ``{scene: {"dielectric":
+    bool, "tags": set}}`` of the study's scenes; ``rows``: the study's rows (:mod:`harness.study.table`).
+
+    ``best_at_budget`` judges, at each budget where another candidate of the selection has a lower median held-out
+    relMSE than the winner and the study rendered it, that candidate the same way (``{"calibration", "label",
+    "file", "judged"}``): the settings that reproduce the suite best at that budget alone, which the winner,
+    chosen over every budget, need not be. ``"why"`` stands for ``"judged"`` where the study did not render it."""
     sel, cal = _winner(selection, calibrations)
     if sel is None:
         return {"why": f"no selection of the best calibration ({Path(selection).name} missing)"}
@@ -153,41 +206,21 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
         return {"why": f"the best calibration ({sel['winner']}) is not one of the study's calibrations"}
     if not cal.get("report"):
         return {"why": f"the best calibration ({sel['winner']}) has no calibration.json beside it"}
-    report = json.loads(Path(cal["report"]).read_text())
-    fitted = list(report.get("scenes") or [])
     grid = budget["grid"]
-    index_matched = [s for s in fitted if not scenes.get(s, {}).get("dielectric")]
-    dielectric = sorted(s for s, i in scenes.items() if i.get("dielectric"))
-    backlit = sorted(s for s, i in scenes.items() if {"back-lit", "homogeneous"} <= set(i.get("tags", ()))
-                     and s not in fitted)
     where = Path(selection).resolve()
     shown = where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where
     out = {"selection": str(shown), "calibration": sel["winner"], "label": cal["label"], "file": cal["file"],
-           "budgets": []}
-    for k in TARGET_STEPS:
-        key = f"N={grid} steps={k}"
-        res = (report.get("results") or {}).get(key)
-        if res is None:
-            out["budgets"].append({"budget": key, "why": f"the calibration has no budget {key}", "met": False})
-            continue
-        held = res.get("held_out") or {}
-        groups = [
-            _group("index-matched, fitted (held out)",
-                   [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in index_matched],
-                   max(len(index_matched) - SPARE, 0)),
-            _group("dielectric", [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in dielectric],
-                   len(dielectric)),
-            _group("back-lit homogeneous, not fitted",
-                   [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in backlit], len(backlit)),
-        ]
-        median = _median_relmse(held, fitted)
-        base = _baseline(sel, key)
-        relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
-                  "limit": RELMSE_FACTOR * base[1] if base else None}
-        relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
-        relmse["in_sample"] = _median_relmse(res.get("in_sample") or {}, fitted)
-        relmse["floor"] = _floor(cal["report"], key, fitted)
-        out["budgets"].append({"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
-                               "met": all(g["met"] for g in groups) and relmse["met"]})
+           "budgets": [_judge(cal, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": []}
     out["met"] = all(b["met"] for b in out["budgets"])
+    for k in TARGET_STEPS:
+        folder = _best_at(sel, f"N={grid} steps={k}")
+        if folder is None or _same_folder(folder, sel["winner"]):
+            continue
+        other = next((c for c in calibrations if _same_folder(Path(c["file"]).parent, folder)), None)
+        entry = {"budget": f"N={grid} steps={k}", "calibration": folder}
+        if other is None or not other.get("report"):
+            entry["why"] = f"{folder} is not one of the study's calibrations"
+        else:
+            entry.update(label=other["label"], file=other["file"], judged=_judge(other, sel, rows, scenes, grid, k))
+        out["best_at_budget"].append(entry)
     return out
