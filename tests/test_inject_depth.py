@@ -116,28 +116,4 @@ class TestGL:
         assert float(np.abs(a - c).max()) > 0.05 * float(c.max())
 
 
-class TestRefusals:
-    @pytest.mark.parametrize("value", [-0.5, 17.0, float("nan"), True])
-    def test_out_of_range(self, value):
-        from harness.errors import InputError
-
-        with pytest.raises(InputError, match=r"--inject-depth: inject_depth: must be a number in \[0, 16\]"):
-            SSLPVParams(inject_depth=value)
-
-    def test_the_command_line_refuses_in_one_line(self, tmp_path, capsys, monkeypatch):
-        from tests.test_bad_input import one_line_runner
-
-        cli = one_line_runner(tmp_path, capsys, monkeypatch)
-        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "8", "--inject-depth", "-1"],
-            "error: --inject-depth: inject_depth: ", "must be a number in [0, 16]")
-
-    def test_a_calibration_fitted_at_the_surface_refuses_a_depth(self, tmp_path, capsys, monkeypatch):
-        from tests.test_bad_input import one_line_runner
-
-        import harness.paths as hp
-
-        cli = one_line_runner(tmp_path, capsys, monkeypatch)
-        monkeypatch.chdir(hp.REPO)
-        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "32", "--inject-depth", "1",
-             "--mapping", "calibrated:baselines/calibrated/collision/calibrated.toml"],
-            "error: --inject-depth: inject_depth: ", "was calibrated with inject_depth=0.0")
+# The one-line refusals of inject_depth are with shade_depth's, in tests/test_shade_depth.py::TestRefusals.

@@ -6,6 +6,8 @@ against the paper's read of the grid shifted by one cell (``np.roll``, no point 
 the twin on a whole render; and the effect the docs claim, measured against the committed reference.
 """
 
+import re
+
 import numpy as np
 import pytest
 
@@ -114,28 +116,39 @@ class TestGL:
         assert abs(vac_deep / vac - 1.0) < 0.3
 
 
+#: The two depths' refusals: (field, flag, out-of-range values, the range as the line says it).
+DEPTHS = [("shade_depth", "--shade-depth", [-0.5, 4.5, float("nan"), True, "1"], "[0, 4]"),
+          ("inject_depth", "--inject-depth", [-0.5, 17.0, float("nan"), True], "[0, 16]")]
+
+
 class TestRefusals:
-    @pytest.mark.parametrize("value", [-0.5, 4.5, float("nan"), True, "1"])
-    def test_out_of_range(self, value):
+    """shade_depth and inject_depth (tests/test_inject_depth.py) are refused alike: out of range, on the command line,
+    and against a calibration fitted at 0."""
+
+    @pytest.mark.parametrize("field,flag,values,span", DEPTHS)
+    def test_out_of_range(self, field, flag, values, span):
         from harness.errors import InputError
 
-        with pytest.raises(InputError, match=r"--shade-depth: shade_depth: must be a number in \[0, 4\]"):
-            SSLPVParams(shade_depth=value)
+        for value in values:
+            with pytest.raises(InputError, match=re.escape(f"{flag}: {field}: must be a number in {span}")):
+                SSLPVParams(**{field: value})
 
-    def test_the_command_line_refuses_in_one_line(self, tmp_path, capsys, monkeypatch):
+    @pytest.mark.parametrize("field,flag,values,span", DEPTHS)
+    def test_the_command_line_refuses_in_one_line(self, tmp_path, capsys, monkeypatch, field, flag, values, span):
         from tests.test_bad_input import one_line_runner
 
         cli = one_line_runner(tmp_path, capsys, monkeypatch)
-        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "8", "--shade-depth", "9"],
-            "error: --shade-depth: shade_depth: ", "must be a number in [0, 4]")
+        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "8", flag, "-1"],
+            f"error: {flag}: {field}: ", f"must be a number in {span}")
 
-    def test_a_calibration_fitted_at_the_surface_refuses_a_depth(self, tmp_path, capsys, monkeypatch):
+    @pytest.mark.parametrize("field,flag,values,span", DEPTHS)
+    def test_a_calibration_fitted_at_0_refuses_a_depth(self, tmp_path, capsys, monkeypatch, field, flag, values, span):
         from tests.test_bad_input import one_line_runner
 
         import harness.paths as hp
 
         cli = one_line_runner(tmp_path, capsys, monkeypatch)
         monkeypatch.chdir(hp.REPO)
-        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "32", "--shade-depth", "1",
+        cli(["render", "thin_ring", "--out", str(tmp_path / "o"), "--steps", "32", flag, "1",
              "--mapping", "calibrated:baselines/calibrated/collision/calibrated.toml"],
-            "error: --shade-depth: shade_depth: ", "was calibrated with shade_depth=0.0")
+            f"error: {flag}: {field}: ", f"was calibrated with {field}=0.0")
