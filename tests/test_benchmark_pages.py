@@ -214,6 +214,7 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
     assert names["collision_loss_form"] == "calibration_form_collision_loss"
     assert names["collision_extrapolated_loss_form"] == "calibration_form_collision_extrapolated_loss"
     assert names["collision_interior_shade"] == "calibration_collision_interior_depth1_shade1"
+    assert names["collision_interior_shade15"] == "calibration_collision_interior_depth1_shade1p5"
     for page in names.values():                         # every committed calibration's page is committed
         if page != "calibration_collision_n16" and page != "calibration_diffusion_n16":
             assert (ROOT / "docs" / "benchmarks" / f"{page}.md").is_file(), page
