@@ -146,10 +146,10 @@ def scene_info(names):
     return out
 
 
-def _judge(cal, sel, rows, scenes, grid, k):
-    """One budget of the target (module docstring) for the study's calibration entry ``cal``: ``{"budget", "K",
-    "groups", "relmse", "met"}``, or ``{"budget", "why", "met": False}`` where its file has no such budget."""
-    report = json.loads(Path(cal["report"]).read_text())
+def _judge(cal, report, sel, rows, scenes, grid, k):
+    """One budget of the target (module docstring) for the study's calibration entry ``cal`` and its
+    ``calibration.json`` ``report``: ``{"budget", "K", "groups", "relmse", "met"}``, or ``{"budget", "why", "met":
+    False}`` where its file has no such budget."""
     fitted = list(report.get("scenes") or [])
     index_matched = [s for s in fitted if not scenes.get(s, {}).get("dielectric")]
     dielectric = sorted(s for s, i in scenes.items() if i.get("dielectric"))
@@ -206,11 +206,12 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
         return {"why": f"the best calibration ({sel['winner']}) is not one of the study's calibrations"}
     if not cal.get("report"):
         return {"why": f"the best calibration ({sel['winner']}) has no calibration.json beside it"}
+    report = json.loads(Path(cal["report"]).read_text())
     grid = budget["grid"]
     where = Path(selection).resolve()
     shown = where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where
     out = {"selection": str(shown), "calibration": sel["winner"], "label": cal["label"], "file": cal["file"],
-           "budgets": [_judge(cal, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": []}
+           "budgets": [_judge(cal, report, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": []}
     out["met"] = all(b["met"] for b in out["budgets"])
     for k in TARGET_STEPS:
         folder = _best_at(sel, f"N={grid} steps={k}")
@@ -221,6 +222,7 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
         if other is None or not other.get("report"):
             entry["why"] = f"{folder} is not one of the study's calibrations"
         else:
-            entry.update(label=other["label"], file=other["file"], judged=_judge(other, sel, rows, scenes, grid, k))
+            judged = _judge(other, json.loads(Path(other["report"]).read_text()), sel, rows, scenes, grid, k)
+            entry.update(label=other["label"], file=other["file"], judged=judged)
         out["best_at_budget"].append(entry)
     return out
