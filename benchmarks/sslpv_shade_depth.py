@@ -35,13 +35,12 @@ BUDGETS = (32, "steady")
 
 def measure(renderer, name, grid=32):
     """``[(outside, inject_depth, shade_depth, {K: (si_relmse, E)})]`` for one scene."""
-    from harness.calibration.run import _reference
     from harness.metrics import compute
-    from harness.runs.sweep import load_reference
+    from harness.regression.accuracy import case_reference, small_scene
     from sslpv_gl.params import SSLPVParams
 
-    scene, folder = _reference(name, None)
-    ref = load_reference(folder, (scene.camera.height, scene.camera.width))
+    scene = small_scene(name)
+    ref = case_reference(scene)
     out = []
     for outside, inject, shade in ROWS:
         p = SSLPVParams(N=grid, steps=32, mapping="collision", outside=outside, inject_depth=inject,

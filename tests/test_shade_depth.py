@@ -98,12 +98,11 @@ class TestGL:
         that reads its own, mostly empty, cell gives a shape error that reading one cell deep removes. On
         marble_sphere at N = 32, K = 32 against the committed reference, the scale-invariant relMSE falls by more
         than a factor 4; under vacuum the read changes it by less than 30 %."""
-        from harness.calibration.run import _reference
         from harness.metrics import compute
-        from harness.runs.sweep import load_reference
+        from harness.regression.accuracy import case_reference, small_scene
 
-        scene, folder = _reference("marble_sphere", None)
-        ref = load_reference(folder, (scene.camera.height, scene.camera.width))
+        scene = small_scene("marble_sphere")
+        ref = case_reference(scene)
 
         def si(**kw):
             res = gl_renderer.render(scene, SSLPVParams(N=32, steps=32, mapping="collision", **kw))

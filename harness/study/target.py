@@ -106,11 +106,13 @@ def _median_relmse(figures, fitted):
     return statistics.median(rel) if rel else None
 
 
-def _baseline(sel, key):
+def _lowest(sel, key, scalar=False):
+    """``(folder, median held-out relMSE)`` of the selection's candidate with the lowest median at ``key`` (only
+    the scalar calibrations, ``form`` false, with ``scalar``), or None."""
     best = None
     for c in sel.get("candidates", []):
         m = (c.get("budgets") or {}).get(key, {}).get("median_held_out_relmse")
-        if not c.get("form") and m is not None and (best is None or m < best[1]):
+        if not (scalar and c.get("form")) and m is not None and (best is None or m < best[1]):
             best = (c["folder"], m)
     return best
 
@@ -170,7 +172,7 @@ def _judge(cal, report, sel, rows, scenes, grid, k):
                [_entry(s, fitted, held, rows, cal["label"], grid, k) for s in backlit], len(backlit)),
     ]
     median = _median_relmse(held, fitted)
-    base = _baseline(sel, key)
+    base = _lowest(sel, key, scalar=True)
     relmse = {"median": median, "baseline": base[0] if base else None, "baseline_median": base[1] if base else None,
               "limit": RELMSE_FACTOR * base[1] if base else None}
     relmse["met"] = median is not None and base is not None and median <= relmse["limit"]
@@ -178,16 +180,6 @@ def _judge(cal, report, sel, rows, scenes, grid, k):
     relmse["floor"] = _floor(cal["report"], key, fitted)
     return {"budget": key, "K": str(k), "groups": groups, "relmse": relmse,
             "met": all(g["met"] for g in groups) and relmse["met"]}
-
-
-def _best_at(sel, key):
-    """The selection's candidate folder with the lowest median held-out relMSE at ``key`` (scalar or form), or None."""
-    best = None
-    for c in sel.get("candidates", []):
-        m = (c.get("budgets") or {}).get(key, {}).get("median_held_out_relmse")
-        if m is not None and (best is None or m < best[1]):
-            best = (c["folder"], m)
-    return best[0] if best else None
 
 
 def target(rows, calibrations, budget, scenes, selection=SELECTION):
@@ -214,7 +206,7 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
            "budgets": [_judge(cal, report, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": []}
     out["met"] = all(b["met"] for b in out["budgets"])
     for k in TARGET_STEPS:
-        folder = _best_at(sel, f"N={grid} steps={k}")
+        folder, _ = _lowest(sel, f"N={grid} steps={k}") or (None, None)
         if folder is None or _same_folder(folder, sel["winner"]):
             continue
         other = next((c for c in calibrations if _same_folder(Path(c["file"]).parent, folder)), None)

@@ -804,8 +804,8 @@ MUTATIONS = (
              "the calibration target takes a scene no fit saw from the study's render at any step count, not at "
              "the budget it judges"),
     Mutation("target_relmse_against_the_form", "metric", "harness/study/target.py",
-             'if not c.get("form") and m is not None and',
-             'if m is not None and',
+             "base = _lowest(sel, key, scalar=True)",
+             "base = _lowest(sel, key)",
              ("tests/test_study_target.py::test_met_when_every_group_is_in_range_and_the_median_is_half",),
              "the calibration target's relMSE halving is measured against the best candidate, forms included, "
              "not against the best scalar calibration"),
