@@ -159,6 +159,7 @@ class TestBadInput:
         (["--family", "collision", "--inject-depth", "-1"], "--inject-depth: inject_depth: must be a number in [0, 16]"),
         (["--family", "collision", "--inject-depth", "deep"], "--inject-depth: inject-depth: 'deep' is not"),
         (["--family", "collision", "--shade-depth", "5"], "--shade-depth: shade_depth: must be a number in [0, 4]"),
+        (["--family", "collision", "--lookup", "bicubic"], "--lookup: lookup:"),
         (["--family", "transport", "--outside", "vacuum"], "--outside: outside: mapping transport needs"),
         (["--family", "diffusion", "--scenes", "thin_ring"], "--scenes: scenes: 1 scene given"),
         (["--family", "diffusion", "--scenes", "thin_ring,nosuch"], "--scenes: scenes: unknown scene 'nosuch'"),
@@ -174,18 +175,18 @@ class TestBadInput:
         assert not out.exists() and list(tmp_path.iterdir()) == []
 
     def test_extension_flags_reach_the_fit(self, tmp_path, capsys, monkeypatch):
-        """--outside, --boundary-reflect, --phase-scaling, --inject-depth and --exitance become the fit's renderer settings (no
-        render here)."""
+        """--outside, --boundary-reflect, --phase-scaling, --inject-depth, --shade-depth, --lookup and --exitance become
+        the fit's renderer settings (no render here)."""
         import harness.calibration.run as cal_run
 
         seen = {}
         monkeypatch.setattr(cal_run, "run_calibrate", lambda **kw: seen.update(kw) or {"out": str(kw["out"])})
         code = main(["calibrate", "--json", "--family", "collision", "--out", str(tmp_path / "o"), "--outside",
                      "interior", "--boundary-reflect", "rdr", "--phase-scaling", "delta-eddington", "--inject-depth", "1",
-                     "--shade-depth", "1"])
+                     "--shade-depth", "1", "--lookup", "trilinear"])
         assert code == 0, capsys.readouterr().err
-        assert seen["settings"] == {"outside": "interior", "boundary_reflect": "rdr",
-                                    "phase_scaling": "delta-eddington", "inject_depth": 1.0, "shade_depth": 1.0}
+        assert seen["settings"] == {"outside": "interior", "boundary_reflect": "rdr", "phase_scaling": "delta-eddington",
+                                    "inject_depth": 1.0, "shade_depth": 1.0, "lookup": "trilinear"}
         code = main(["calibrate", "--json", "--family", "diffusion", "--out", str(tmp_path / "o"), "--outside",
                      "extrapolated", "--exitance", "boundary"])
         assert code == 0, capsys.readouterr().err

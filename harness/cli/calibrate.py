@@ -41,6 +41,8 @@ def configure(sp):
     sp.add_argument("--shade-depth", dest="shade_depth", metavar="CELLS", help="renderer setting of the fit, an "
                     "extension: read the grid this many cells inwards of each shaded point, in [0, 4] (sslpv_gl.shade "
                     "Eq. (S1); default: the family's, 0)")
+    sp.add_argument("--lookup", metavar="LOOKUP", help="renderer setting of the fit: the shading's read of the "
+                    "accumulation grid, cell (texelFetch) | trilinear (default: the family's, cell)")
     add_progress(sp)
     add_no_cache(sp)
 
@@ -75,7 +77,7 @@ def run(args):
         settings["inject_depth"] = _numbers("--inject-depth", args.inject_depth, float)[0]
     if args.shade_depth is not None:
         settings["shade_depth"] = _numbers("--shade-depth", args.shade_depth, float)[0]
-    for key in ("outside", "boundary_reflect", "phase_scaling", "exitance"):
+    for key in ("outside", "boundary_reflect", "phase_scaling", "exitance", "lookup"):
         if getattr(args, key) is not None:
             settings[key] = getattr(args, key)
     rng = None
