@@ -276,3 +276,36 @@ def test_sweep_records_the_calibrated_file(calibration, tmp_path):
         for c in st.configs(run_id=summary["run_id"]):
             assert c["calibration"]["path"] == path and c["calibration"]["sha256"] == sha
             assert c["calibration"]["steps"] == c["params"]["steps"]
+
+
+def test_a_lookup_names_a_calibration(tmp_path, monkeypatch):
+    """The lookup is no extension (both reads are the published method's), yet a calibration fitted with the
+    trilinear read is another calibration: its page and its study column are named after it, and one fitted with
+    the cell read (the default) is named as before."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    from harness.calibration.families import fit_extensions, fit_named
+    from harness.study.spec import study_label
+
+    assert fit_extensions("collision", {"skip": 2, "lookup": "trilinear"}) == {}
+    assert fit_named("collision", {"skip": 2, "lookup": "cell"}) == {}
+    assert fit_named("collision", {"outside": "interior", "lookup": "trilinear"}) == \
+        {"outside": "interior", "lookup": "trilinear"}
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.syspath_prepend(str(root / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("bench_calibration_table", root / "benchmarks" / "calibration_table.py")
+    table = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(table)
+    cal = json.loads((root / "baselines" / "calibrated" / "collision" / "calibration.json").read_text())
+    assert table.page_name(cal)[0] == "calibration_collision"
+    cal["settings"] = dict(cal["settings"], lookup="trilinear")
+    assert table.page_name(cal)[0] == "calibration_collision_trilinear"
+
+    text = (root / "baselines" / "calibrated" / "collision" / "calibrated.toml").read_text()
+    assert 'lookup = "cell"' in text
+    (tmp_path / "calibrated.toml").write_text(text.replace('lookup = "cell"', 'lookup = "trilinear"'))
+    assert study_label(f"calibrated:{tmp_path / 'calibrated.toml'}") == "calibrated collision (trilinear lookup)"
+    assert study_label("calibrated:baselines/calibrated/collision/calibrated.toml") == "calibrated collision"

@@ -98,13 +98,15 @@ def study_label(mapping):
 
 def _fit_extensions(cal):
     """``" (extrapolated, J exitance)"``: the extensions a calibrated file was fitted with beyond its family's own
-    settings (:func:`harness.calibration.families.fit_extensions`), so that two calibrations of one family with other
-    extensions are two columns; ``""`` where there are none. In parentheses, not joined with `` + ``: a
-    calibration stays a column of the headline, not an extension family judged against its base."""
-    from harness.calibration.families import fit_extensions
+    settings, and a lookup other than ``cell`` (``trilinear lookup``; :func:`harness.calibration.families.fit_named`),
+    so that two calibrations of one family with other settings are two columns; ``""`` where there are none. In
+    parentheses, not joined with `` + ``: a calibration stays a column of the headline, not an extension family
+    judged against its base."""
+    from harness.calibration.families import NAMED, fit_named
     from harness.study.extensions import extension_tags
 
-    tags = extension_tags(fit_extensions(cal.family, cal.settings))
+    named = fit_named(cal.family, cal.settings)
+    tags = extension_tags(named) + [f"{named[k]} {k}" for k in NAMED if k in named]
     return f" ({', '.join(tags)})" if tags else ""
 
 
