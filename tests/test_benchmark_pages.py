@@ -191,7 +191,7 @@ def test_mnee_chains_runs_write_distinct_pages(monkeypatch):
 def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
     """``calibration_table.py`` names one page per committed calibration: every folder's page name differs, and a
     setting that is not the family's own (outside, phase scaling, R_dr, the exitance read, the injection's and the
-    shading's depths) is in the name."""
+    shading's depths, the trilinear lookup) is in the name."""
     import json
     import tomllib
 
@@ -215,6 +215,10 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
     assert names["collision_extrapolated_loss_form"] == "calibration_form_collision_extrapolated_loss"
     assert names["collision_interior_shade"] == "calibration_collision_interior_depth1_shade1"
     assert names["collision_interior_shade15"] == "calibration_collision_interior_depth1_shade1p5"
+    assert names["collision_interior_shade_trilinear"] == "calibration_collision_interior_depth1_shade1_trilinear"
+    assert names["collision_interior_shade_trilinear_loss_form"] == \
+        "calibration_form_collision_interior_depth1_shade1_trilinear_loss"
+    assert names["collision_interior_shade05_trilinear"] == "calibration_collision_interior_depth1_shade0p5_trilinear"
     for page in names.values():                         # every committed calibration's page is committed
         if page != "calibration_collision_n16" and page != "calibration_diffusion_n16":
             assert (ROOT / "docs" / "benchmarks" / f"{page}.md").is_file(), page
