@@ -16,13 +16,14 @@ renderer setting and budget, over a scan of ``sigma_scale``:
 * **SSLPV** at grid ``N`` for every mapping and ``outside`` treatment the renderer has (``transport``
   with the two it allows), the paper's skip of 2, the collision mapping with ``skip = 0`` and with
   delta-Eddington scaling, and the collision mapping with the extensions of the committed calibrations
-  ``collision_interior_shade`` and ``collision_interior_shade15`` (``interior``, an injection 1 mfp' deep,
-  the grid read 1 and 1.5 cells deep), at ``sigma_scale`` from 1e-4 to 1e3 (a third of a decade apart);
+  ``collision_interior_shade`` and ``collision_interior_shade_trilinear`` (``interior``, an injection 1 mfp'
+  deep, the grid read 1 cell deep, by cell and trilinear), at ``sigma_scale`` from 1e-4 to 1e3 (a third of a
+  decade apart);
 * per budget and setting: the attainable interval of ``rho_A / rho_B`` (W3), whether it meets the
   band ``[0.64, 1.5625]`` that both scenes in ``[0.8, 1.25]`` need, and the least energy ratio the
   front-lit twin must have when the back-lit scene is in range (W4);
-* the best committed calibration (``baselines/calibrated/best``) and the loss forms of those extensions
-  rendered on both scenes.
+* the best committed calibration (``baselines/calibrated/best``), the collision family's loss form, and the
+  loss forms of those extensions rendered on both scenes.
 
 Usage: ``python benchmarks/lighting_twin.py [--scene backlit_sphere] [--grid 32] [--photons 65536]
 [--truth auto|tracer|mitsuba] [--mitsuba-check] [--write]`` (about 20 minutes on 2 cores, and the twin's
@@ -53,9 +54,10 @@ from harness.errors import InputError  # noqa: E402
 BUDGETS = (8, 16, 32, 64, "steady")
 SIGMA_SCALES = tuple(float(x) for x in np.logspace(-4.0, 3.0, 22))
 BEST = Path(__file__).resolve().parents[1] / "baselines" / "calibrated" / "best" / "calibrated.toml"
-#: the committed loss forms of the extensions that :func:`settings` scans last
-EXTENDED = tuple(BEST.parents[1] / name / "calibrated.toml"
-                 for name in ("collision_interior_shade_loss_form", "collision_interior_shade15_loss_form"))
+#: committed calibrations rendered beside the best: the paper's setting's loss form and those of the extensions that
+#: :func:`settings` scans last
+EXTENDED = tuple(BEST.parents[1] / name / "calibrated.toml" for name in (
+    "collision_loss_form", "collision_interior_shade_loss_form", "collision_interior_shade_trilinear_loss_form"))
 
 
 def settings():
@@ -70,9 +72,10 @@ def settings():
     out.append(("collision, vacuum, skip 0", {"mapping": "collision", "outside": "vacuum", "skip": 0}))
     out.append(("collision, vacuum, delta-Eddington", {"mapping": "collision", "outside": "vacuum",
                                                         "phase_scaling": "delta-eddington"}))
-    for depth in (1.0, 1.5):       # the committed calibrations with an injection and a read at depth
-        out.append((f"collision, interior, depth 1 mfp', read {depth:g} cells deep",
-                    {"mapping": "collision", "outside": "interior", "inject_depth": 1.0, "shade_depth": depth}))
+    for lookup in ("cell", "trilinear"):     # the committed calibrations with an injection and a read at depth
+        out.append((f"collision, interior, depth 1 mfp', read 1 cell deep, {lookup} lookup",
+                    {"mapping": "collision", "outside": "interior", "inject_depth": 1.0, "shade_depth": 1.0,
+                     "lookup": lookup}))
     return out
 
 
@@ -268,7 +271,8 @@ def main(argv=None):
     page.heading("Committed calibrations on both scenes")
     page.table(["calibration", "budget", "A: energy ratio", "B: energy ratio", "rho_A / rho_B"], rows,
                note=f"`--mapping calibrated:PATH/calibrated.toml` at N = {args.grid}, with the file's renderer settings: "
-                    "the best (`baselines/calibrated/best`), then the loss forms with the extensions scanned above. "
+                    "the best (`baselines/calibrated/best`), then the collision family's loss form and those with the "
+                    "extensions scanned above. "
                     "Energy ratio against the truth above (the mean of the per-channel ratios).")
     page.finish(args.write)
     if args.write:                                 # after the page: its header checks the tree is clean
