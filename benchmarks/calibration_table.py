@@ -45,12 +45,12 @@ def _name_part(key, value):
 
 def settings_suffix(cal):
     """``(name suffix, title suffix)``: each setting of :data:`NAMED_SETTINGS` of a calibration (scalar or form)
-    where it is not its family's own (:func:`harness.calibration.families.fit_named`; a family calibrated
+    where it is not its family's own (:func:`harness.calibration.families.fit_extensions`; a family calibrated
     with another outside treatment, phase scaling, exitance read or lookup is another calibration):
     ``("_extrapolated", " with outside = extrapolated")``."""
-    from harness.calibration.families import fit_named
+    from harness.calibration.families import fit_extensions
 
-    ext = fit_named(cal["family"], cal.get("settings", {}))
+    ext = fit_extensions(cal["family"], cal.get("settings", {}))
     extras = [(k, ext[k]) for k in NAMED_SETTINGS if k in ext]
     return ("".join("_" + _name_part(k, v) for k, v in extras),
             " with " + ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}" for k, v in extras)

@@ -26,8 +26,11 @@ LOOKUPS = ("cell", "trilinear")
 PRECISIONS = ("fp32", "fp16")
 OUTSIDE = OUTSIDE_MODES
 #: The settings whose other values are extensions (options the paper does not have), with the paper's value of each.
+#: The paper shades from "the point light intensities of the boundary grid cells" (Sec. 3.3): a cell's own
+#: coefficients, ``lookup = "cell"``; the trilinear read between cell centres is an extension.
 PAPER_SETTINGS = {"outside": "vacuum", "boundary_reflect": "none", "phase_scaling": "none", "eta2": False,
-                  "inject_offset": 0.0, "inject_depth": 0.0, "exitance": "isotropic", "shade_depth": 0.0}
+                  "inject_offset": 0.0, "inject_depth": 0.0, "exitance": "isotropic", "shade_depth": 0.0,
+                  "lookup": "cell"}
 #: Mappings that are themselves extensions, and the published mapping each is judged against.
 EXTENSION_MAPPINGS = {"transport": "collision"}
 #: ``steps`` values other than a count: propagate to convergence, or solve the steady state.

@@ -278,21 +278,31 @@ def test_sweep_records_the_calibrated_file(calibration, tmp_path):
             assert c["calibration"]["steps"] == c["params"]["steps"]
 
 
-def test_a_lookup_names_a_calibration(tmp_path, monkeypatch):
-    """The lookup is no extension (both reads are the published method's), yet a calibration fitted with the
-    trilinear read is another calibration: its page and its study column are named after it, and one fitted with
-    the cell read (the default) is named as before."""
+def test_the_trilinear_read_is_an_extension(tmp_path, monkeypatch):
+    """The paper shades from each boundary cell's own coefficients (lookup = cell); the trilinear read is an
+    extension: a calibration fitted with it is another calibration, its page and its study column named after it,
+    a study configuration with it competes in a family of its own (collision + trilinear), and a render that
+    turns it on without an outside treatment takes the extensions' committed one."""
     import importlib.util
     import json
     from pathlib import Path
 
-    from harness.calibration.families import fit_extensions, fit_named
+    from harness.calibration.families import fit_extensions
+    from harness.methods.extension_outside import with_extension_outside
+    from harness.study.extensions import family_suffix
     from harness.study.spec import study_label
+    from sslpv_gl.params import SSLPVParams
 
-    assert fit_extensions("collision", {"skip": 2, "lookup": "trilinear"}) == {}
-    assert fit_named("collision", {"skip": 2, "lookup": "cell"}) == {}
-    assert fit_named("collision", {"outside": "interior", "lookup": "trilinear"}) == \
+    assert fit_extensions("collision", {"skip": 2, "lookup": "cell"}) == {}
+    assert fit_extensions("collision", {"outside": "interior", "lookup": "trilinear"}) == \
         {"outside": "interior", "lookup": "trilinear"}
+    assert family_suffix({"mapping": "collision", "lookup": "trilinear"}) == " + trilinear"
+    assert family_suffix({"mapping": "collision", "lookup": "cell"}) == ""
+    choice = tmp_path / "outside.json"
+    choice.write_text(json.dumps({"format": "sslpv-extensions-outside", "outside": "interior",
+                                  "by_mode": {"interior": 0.9}}))
+    assert with_extension_outside({"lookup": "trilinear"}, SSLPVParams, choice)["outside"] == "interior"
+    assert "outside" not in with_extension_outside({"lookup": "cell"}, SSLPVParams, choice)
 
     root = Path(__file__).resolve().parents[1]
     monkeypatch.syspath_prepend(str(root / "benchmarks"))
@@ -307,5 +317,5 @@ def test_a_lookup_names_a_calibration(tmp_path, monkeypatch):
     text = (root / "baselines" / "calibrated" / "collision" / "calibrated.toml").read_text()
     assert 'lookup = "cell"' in text
     (tmp_path / "calibrated.toml").write_text(text.replace('lookup = "cell"', 'lookup = "trilinear"'))
-    assert study_label(f"calibrated:{tmp_path / 'calibrated.toml'}") == "calibrated collision (trilinear lookup)"
+    assert study_label(f"calibrated:{tmp_path / 'calibrated.toml'}") == "calibrated collision (trilinear)"
     assert study_label("calibrated:baselines/calibrated/collision/calibrated.toml") == "calibrated collision"

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from harness.errors import InputError
 
-__all__ = ["Family", "FAMILIES", "family", "COMPARED", "fit_extensions", "NAMED", "fit_named"]
+__all__ = ["Family", "FAMILIES", "family", "COMPARED", "fit_extensions"]
 
 
 @dataclass(frozen=True)
@@ -69,19 +69,6 @@ def fit_extensions(family_name, settings):
 
     own = FAMILIES[family_name].settings if family_name in FAMILIES else {}
     return {k: v for k, v in settings.items() if k in PAPER_SETTINGS and v != own.get(k, PAPER_SETTINGS[k])}
-
-
-#: Renderer settings that are no extension (each value is the published method's) but that make a calibration
-#: fitted with another value another calibration, with the value a calibration is not named after.
-NAMED = {"lookup": "cell"}
-
-
-def fit_named(family_name, settings):
-    """``{setting: value}``: :func:`fit_extensions`, and each setting of :data:`NAMED` whose value is not the
-    one a calibration is not named after: what a calibration's page and study label are named after."""
-    out = fit_extensions(family_name, settings)
-    out.update({k: settings[k] for k, plain in NAMED.items() if settings.get(k, plain) != plain})
-    return out
 
 
 def family(name):

@@ -42,7 +42,8 @@ def configure(sp):
                     "extension: read the grid this many cells inwards of each shaded point, in [0, 4] (sslpv_gl.shade "
                     "Eq. (S1); default: the family's, 0)")
     sp.add_argument("--lookup", metavar="LOOKUP", help="renderer setting of the fit: the shading's read of the "
-                    "accumulation grid, cell (texelFetch) | trilinear (default: the family's, cell)")
+                    "accumulation grid, cell (each cell's own coefficients, the paper's) | trilinear (an extension: "
+                    "interpolated between cell centres; default: the family's, cell)")
     add_progress(sp)
     add_no_cache(sp)
 

@@ -7,7 +7,8 @@ the outside treatments ``interior``, ``absorb``, ``extrapolated`` and ``material
 rdr``, Sec. 10), delta-Eddington scaling of forward-peaked media (``phase_scaling``, Sec. 9), the
 ``eta^2`` radiance compression (``eta2``), an inward injection offset (``inject_offset``, in scene units, and
 ``inject_depth``, in reduced mean free paths of the medium; :mod:`sslpv_gl.inject` Eq. (J1)), the shading's
-read of the grid below the surface (``shade_depth``, in cells; :mod:`sslpv_gl.shade` Eq. (S1)) and the
+read of the grid below the surface (``shade_depth``, in cells; :mod:`sslpv_gl.shade` Eq. (S1)), its read
+interpolated between cell centres (``lookup = trilinear``; the paper reads each cell's own coefficients) and the
 ``transport`` mapping (Sec. 11: one step is one cell of path), which is judged against the paper's
 ``collision`` (:data:`MAPPING_BASE`) and needs an outside treatment that takes light out. A
 configuration with any of them competes in its own family, named after its mapping's family and its

@@ -98,15 +98,13 @@ def study_label(mapping):
 
 def _fit_extensions(cal):
     """``" (extrapolated, J exitance)"``: the extensions a calibrated file was fitted with beyond its family's own
-    settings, and a lookup other than ``cell`` (``trilinear lookup``; :func:`harness.calibration.families.fit_named`),
-    so that two calibrations of one family with other settings are two columns; ``""`` where there are none. In
-    parentheses, not joined with `` + ``: a calibration stays a column of the headline, not an extension family
-    judged against its base."""
-    from harness.calibration.families import NAMED, fit_named
+    settings (:func:`harness.calibration.families.fit_extensions`), so that two calibrations of one family with other
+    extensions are two columns; ``""`` where there are none. In parentheses, not joined with `` + ``: a
+    calibration stays a column of the headline, not an extension family judged against its base."""
+    from harness.calibration.families import fit_extensions
     from harness.study.extensions import extension_tags
 
-    named = fit_named(cal.family, cal.settings)
-    tags = extension_tags(named) + [f"{named[k]} {k}" for k in NAMED if k in named]
+    tags = extension_tags(fit_extensions(cal.family, cal.settings))
     return f" ({', '.join(tags)})" if tags else ""
 
 
