@@ -54,8 +54,8 @@ from harness.errors import InputError  # noqa: E402
 BUDGETS = (8, 16, 32, 64, "steady")
 SIGMA_SCALES = tuple(float(x) for x in np.logspace(-4.0, 3.0, 22))
 BEST = Path(__file__).resolve().parents[1] / "baselines" / "calibrated" / "best" / "calibrated.toml"
-#: committed calibrations rendered beside the best: the paper's setting's loss form and those of the extensions that
-#: :func:`settings` scans last
+#: committed calibrations rendered beside the best (less the one the best is): the paper's setting's loss form and
+#: those of the extensions that :func:`settings` scans last
 EXTENDED = tuple(BEST.parents[1] / name / "calibrated.toml" for name in (
     "collision_loss_form", "collision_interior_shade_loss_form", "collision_interior_shade_trilinear_loss_form"))
 
@@ -259,8 +259,11 @@ def main(argv=None):
                    note="collision, vacuum: the paper's setting." if name == "collision, vacuum" else
                    "The setting with the largest ratio at K = 32.")
 
+    import json
+
+    winner = BEST.parents[3] / json.loads((BEST.parent / "selection.json").read_text())["winner"]
     rows = []
-    for path in (BEST, *EXTENDED):
+    for path in (BEST, *(p for p in EXTENDED if p.parent.resolve() != winner.resolve())):   # the best's own fit once
         for b in BUDGETS:
             p = SSLPVParams.given(N=args.grid, steps=b, mapping=f"calibrated:{path}")
             e = [twin.channel_energies(renderer.render(sc, p).subsurface, mask) for sc in (scene, front)]

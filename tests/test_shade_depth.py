@@ -119,8 +119,8 @@ class TestGL:
         injection one reduced mean free path deep, the cell lookup shades each cell's footprint with one value, and
         the steps between cells are most of the image's shape error: on jade_veins (heterogeneous) at N = 32 in the
         steady state, against the committed reference, the trilinear lookup lowers the scale-invariant relMSE by
-        more than a factor 3. Under the paper's vacuum, where light outside the object dominates, it changes it by
-        less than 30 %."""
+        more than a factor 3. Under the paper's vacuum, whose surface cells also hold the light around the object, it
+        changes it by less than 30 %."""
         from harness.metrics import compute
         from harness.regression.accuracy import case_reference, small_scene
 
