@@ -73,6 +73,43 @@ def test_committed_best_is_what_the_command_writes_from_the_committed_calibratio
     assert mine.settings == theirs.settings and mine.budgets == theirs.budgets
 
 
+def test_the_winner_is_ranked_again_at_every_other_grid_it_holds(tmp_path):
+    """x wins at N = 32 but y leads at N = 64: ``other_grids`` ranks the candidates that hold N = 64 (z, fitted at
+    N = 32 alone, is not among them) by the same (S1), and the written header names y as the leader there."""
+    def two_grids(name, m32, m64):
+        f = Path(fake(tmp_path / name, m32))
+        cal = json.loads((f / "calibration.json").read_text())
+        for k, m in zip((8, 16, "steady"), m64):
+            cal["budgets"].append([64, k])
+            cal["results"][f"N=64 steps={k}"] = {"targets": {"median_held_out_relmse": m, "energy_outside": {}}}
+        (f / "calibration.json").write_text(json.dumps(cal))
+        return str(f)
+
+    x, y = two_grids("x", [0.01, 0.01, 0.01], [0.2, 0.2, 0.2]), two_grids("y", [0.02, 0.02, 0.02], [0.1, 0.05, 0.2])
+    z = fake(tmp_path / "z", [0.03, 0.03, 0.03])
+    sel = select([x, y, z], 32)
+    assert sel["winner"] == x and [o["grid"] for o in sel["other_grids"]] == [64]
+    o = sel["other_grids"][0]
+    assert o["leader"] == y and o["winner_rank"] == 2 and [c["folder"] for c in o["candidates"]] == [y, x]
+    assert o["candidates"][0]["score"] == pytest.approx((0.1 * 0.05 * 0.2) ** (1 / 3), rel=1e-12)
+    assert main(["calibrate-best", "--json", "--from", x, y, z, "--out", str(tmp_path / "best")]) == 0
+    header = (tmp_path / "best" / "calibrated.toml").read_text().split("format =")[0]
+    assert f"At N = 64 it ranks 2 of 2 by the same rule; {y} leads there" in header
+    only = select([x, z], 32)["other_grids"][0]                 # the winner alone holds N = 64: first of one
+    assert only["winner_rank"] == 1 and only["leader"] == x
+
+
+def test_committed_best_holds_every_grid_of_the_study():
+    """The best calibration is usable at N = 16, 32 and 64, each at every real-time budget: a user who renders
+    it at the grids the study reports (``studies/default.toml``) is not refused for a missing grid."""
+    best = load_calibrated(BEST / "calibrated.toml", tuple(MAPPINGS))
+    have = {(b.N, b.steps) for b in best.budgets}
+    want = {(n, k) for n in (16, 32, 64) for k in (8, 16, 32, 64, "steady")}
+    assert want <= have, sorted(want - have, key=str)
+    for n, k in sorted(want, key=str):
+        assert best.budget(n, k).N == n
+
+
 def test_the_command_writes_the_winner_and_reads_it_back(tmp_path, capsys):
     a, b = fake(tmp_path / "a", [0.3, 0.3, 0.3]), fake(tmp_path / "b", [0.1, 0.2, 0.3])
     assert main(["calibrate-best", "--json", "--from", a, b, "--out", str(tmp_path / "best")]) == 0

@@ -286,3 +286,17 @@ def test_no_best_at_one_budget_where_the_winner_is_lowest_or_the_study_lacks_it(
                                     "why": f"{tmp_path / 'other'} is not one of the study's calibrations"}]
     intro, table = best_at_budget_table(t)
     assert table == [["N=32 steps=steady", "–", "–", t["best_at_budget"][0]["why"], "no"]]
+
+
+def test_the_winners_rank_at_other_grids_is_said_beside_the_target(tmp_path):
+    """``selection.json``'s ``other_grids`` reaches the target's intro: the winner's rank and score at each other
+    grid, and the leader there where it is not the winner; no sentence without other grids."""
+    sel, cals = _setup(tmp_path, {s: (1.0, 0.04) for s in FITTED})
+    assert "ranks" not in target_table(target(_rows(), cals, BUDGET, _scenes(), selection=sel))[0]
+    data = json.loads(sel.read_text())
+    win = data["winner"]
+    data["other_grids"] = [{"grid": 64, "budgets": ["N=64 steps=32"], "leader": "lead", "winner_rank": 2,
+                            "candidates": [{"folder": "lead", "score": 0.03}, {"folder": win, "score": 0.09}]}]
+    sel.write_text(json.dumps(data))
+    intro = target_table(target(_rows(), cals, BUDGET, _scenes(), selection=sel))[0]
+    assert "at N = 64 it ranks 2 of 2 (score 0.09), behind `lead` (0.03)" in intro

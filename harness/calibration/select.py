@@ -26,6 +26,10 @@ Limits:
   candidate's score, so a near tie can be seen.
 * The score weighs every common budget alike; a calibration best at ``steps = steady`` but worse
   at the short budgets can lose.
+* The ranking is at one grid. A winner that also holds other grids may rank lower there:
+  ``selection.json``'s ``other_grids`` ranks, by (S1) at each such grid, the candidates that hold it
+  (``calibrated.toml``'s header names the leader where it is not the winner), so that a render at
+  another grid can take that grid's leader instead.
 """
 
 from __future__ import annotations
@@ -76,7 +80,8 @@ def candidate(folder, grid):
                           "scenes": len(cal["scenes"])}
     return {"folder": str(folder), "family": cal.get("family"), "form": "coefficients" in next(
         iter(cal["results"].values()), {}), "scenes": sorted(cal["scenes"]),
-        "settings": cal.get("settings", {}), "budgets": budgets}
+        "settings": cal.get("settings", {}), "budgets": budgets,
+        "grids": sorted({int(N) for N, _ in cal["budgets"]})}
 
 
 def select(folders, grid=32):
@@ -91,18 +96,53 @@ def select(folders, grid=32):
         if c["scenes"] != cands[0]["scenes"]:
             raise InputError(c["folder"], "scenes", f"fitted on other scenes than {cands[0]['folder']}, so their "
                              "held-out medians are not comparable", "select among calibrations of one scene set")
-    common = [b for b in cands[0]["budgets"] if all(b in c["budgets"] for c in cands)]
+    common = _rank(cands)
     if not common:
         raise InputError("--from", "budgets", f"the calibrations share no budget at N = {grid}",
                          "select among calibrations fitted for the same budgets")
-    for c in cands:
-        logs = [math.log(c["budgets"][b]["median_held_out_relmse"]) for b in common]
-        c["score"] = math.exp(sum(logs) / len(logs))
-    cands.sort(key=lambda c: c["score"])
     return {"format": "sslpv-calibration-selection", "grid": int(grid), "budgets": common,
             "rule": "lowest geometric mean over the common budgets of the median held-out relMSE (Eq. S1 of "
                     "harness.calibration.select)",
-            "winner": cands[0]["folder"], "candidates": cands}
+            "winner": cands[0]["folder"], "candidates": cands,
+            "other_grids": _other_grids(folders, cands[0], grid)}
+
+
+def _rank(cands):
+    """Score every candidate by (S1) over the budgets they all hold and sort them, lowest first, in place ->
+    those budgets (empty: none in common, nothing scored)."""
+    common = [b for b in cands[0]["budgets"] if all(b in c["budgets"] for c in cands)]
+    if common:
+        for c in cands:
+            logs = [math.log(c["budgets"][b]["median_held_out_relmse"]) for b in common]
+            c["score"] = math.exp(sum(logs) / len(logs))
+        cands.sort(key=lambda c: c["score"])
+    return common
+
+
+def _held_out_at(folder, grid):
+    """:func:`candidate` at ``grid``, or None where a budget there has no held-out validation."""
+    try:
+        return candidate(folder, grid)
+    except InputError:
+        return None
+
+
+def _other_grids(folders, winner, grid):
+    """At each other grid the winner holds: (S1) over the candidates that hold that grid's budgets ->
+    ``[{"grid", "budgets", "leader", "winner_rank", "candidates": [{"folder", "score"}]}]``."""
+    out = []
+    for n in sorted(set(winner["grids"]) - {int(grid)}):
+        here = [c for c in map(lambda f: _held_out_at(f, n), folders) if c and c["budgets"]]
+        want = set(candidate(winner["folder"], n)["budgets"])
+        here = [c for c in here if want <= set(c["budgets"])]       # rank on the winner's budgets there
+        common = _rank(here)
+        if not common:
+            continue
+        ranked = [c["folder"] for c in here]
+        out.append({"grid": n, "budgets": common, "leader": ranked[0],
+                    "winner_rank": ranked.index(winner["folder"]) + 1,
+                    "candidates": [{"folder": c["folder"], "score": c["score"]} for c in here]})
+    return out
 
 
 def write_best(folders, out, grid=32, command="sslpv-harness calibrate-best"):
@@ -120,7 +160,13 @@ def write_best(folders, out, grid=32, command="sslpv-harness calibrate-best"):
     sel |= {"created": created, "command": command, "commit": git_commit()}
     header = (f"# The best calibrated mapping at N = {grid}, chosen by {command} on {created} from "
               f"{len(folders)} calibrations\n# by {sel['rule']}: {win['folder']} (score {win['score']:.4g}; "
-              f"selection.json beside this file ranks them all).\n# Its own file follows unchanged.\n")
+              f"selection.json beside this file ranks them all).\n")
+    for o in sel["other_grids"]:
+        lead = o["candidates"][0]
+        header += (f"# At N = {o['grid']} it ranks {o['winner_rank']} of {len(o['candidates'])} by the same rule"
+                   + ("" if o["winner_rank"] == 1 else f"; {lead['folder']} leads there (score {lead['score']:.4g})")
+                   + ".\n")
+    header += "# Its own file follows unchanged.\n"
     with atomic_dir(out) as tmp:
         (tmp / "calibrated.toml").write_text(header + (Path(win["folder"]) / "calibrated.toml").read_text())
         load_calibrated(tmp / "calibrated.toml", tuple(MAPPINGS))        # what we write must read back

@@ -229,6 +229,23 @@ def best_at_budget_table(t):
     return intro, rows
 
 
+def _other_grids_text(t):
+    """The selection's ranking at the other grids its winner holds (``selection.json``'s ``other_grids``), as a
+    sentence; empty where it has none."""
+    parts = []
+    for o in t.get("other_grids") or []:
+        lead = o["candidates"][0]
+        mine = next(c for c in o["candidates"] if c["folder"] == t["calibration"])
+        parts.append(f"at N = {o['grid']} it ranks {o['winner_rank']} of {len(o['candidates'])} (score "
+                     f"{g(mine['score'])})" + ("" if o["winner_rank"] == 1 else
+                                               f", behind `{lead['folder']}` ({g(lead['score'])})"))
+    if not parts:
+        return ""
+    return (f" The selection ranks at N = {t.get('grid', 32)}; by the same rule (Eq. S1 of `harness/calibration/select.py`) over the "
+            "candidates that hold another grid, " + "; ".join(parts) + ": a render at that grid may take the leader "
+            "there instead.")
+
+
 def target_table(t):
     """The calibration target (:func:`harness.study.target.target`) as ``(intro, rows, verdict)``: ``rows`` are
     ``[budget, target, needed, value, met]`` text cells; ``intro`` is None when no target was judged."""
@@ -243,7 +260,8 @@ def target_table(t):
              f"[{g(lo)}, {g(hi)}] on all but {SPARE} of the index-matched scenes it was fitted on (as its own "
              "leave-one-scene-out validation rendered them), on every dielectric scene and on every back-lit "
              "homogeneous scene it was not fitted on (the study's renders of the committed file); and a median "
-             f"held-out relMSE at most {g(RELMSE_FACTOR)} × the lowest among the selection's scalar calibrations.")
+             f"held-out relMSE at most {g(RELMSE_FACTOR)} × the lowest among the selection's scalar calibrations."
+             + _other_grids_text(t))
     rows = [r for b in t["budgets"] for r in _budget_rows(b)]
     verdict = f"Target met at every budget: {_yes(t['met'])}. Where a scene misses, *What limits SSLPV here* gives the measured decomposition."
     floors = [(b["budget"], b["relmse"]) for b in t["budgets"] if "why" not in b and b["relmse"].get("floor")

@@ -203,7 +203,8 @@ def target(rows, calibrations, budget, scenes, selection=SELECTION):
     where = Path(selection).resolve()
     shown = where.relative_to(paths.REPO) if where.is_relative_to(paths.REPO) else where
     out = {"selection": str(shown), "calibration": sel["winner"], "label": cal["label"], "file": cal["file"],
-           "budgets": [_judge(cal, report, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": []}
+           "budgets": [_judge(cal, report, sel, rows, scenes, grid, k) for k in TARGET_STEPS], "best_at_budget": [],
+           "grid": grid, "other_grids": sel.get("other_grids", [])}
     out["met"] = all(b["met"] for b in out["budgets"])
     for k in TARGET_STEPS:
         folder, _ = _lowest(sel, f"N={grid} steps={k}") or (None, None)
