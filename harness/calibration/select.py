@@ -132,9 +132,11 @@ def _other_grids(folders, winner, grid):
     ``[{"grid", "budgets", "leader", "winner_rank", "candidates": [{"folder", "score"}]}]``."""
     out = []
     for n in sorted(set(winner["grids"]) - {int(grid)}):
-        here = [c for c in map(lambda f: _held_out_at(f, n), folders) if c and c["budgets"]]
-        want = set(candidate(winner["folder"], n)["budgets"])
-        here = [c for c in here if want <= set(c["budgets"])]       # rank on the winner's budgets there
+        mine = _held_out_at(winner["folder"], n)
+        if mine is None:
+            continue                                                # not validated there: nothing to rank
+        here = [c for c in (_held_out_at(f, n) for f in folders) if c]
+        here = [c for c in here if set(mine["budgets"]) <= set(c["budgets"])]   # on the winner's budgets there
         common = _rank(here)
         if not common:
             continue

@@ -235,7 +235,7 @@ def _other_grids_text(t):
     parts = []
     for o in t.get("other_grids") or []:
         lead = o["candidates"][0]
-        mine = next(c for c in o["candidates"] if c["folder"] == t["calibration"])
+        mine = o["candidates"][o["winner_rank"] - 1]
         parts.append(f"at N = {o['grid']} it ranks {o['winner_rank']} of {len(o['candidates'])} (score "
                      f"{g(mine['score'])})" + ("" if o["winner_rank"] == 1 else
                                                f", behind `{lead['folder']}` ({g(lead['score'])})"))
