@@ -63,9 +63,11 @@ def _load(folder):
     return cal
 
 
-def candidate(folder, grid):
-    """One calibration's held-out figures at ``grid`` -> dict (label -> median, energy outside)."""
-    cal = _load(folder)
+def candidate(folder, grid, cal=None):
+    """One calibration's held-out figures at ``grid`` -> dict (label -> median, energy outside); ``cal``: its
+    ``calibration.json`` where already read."""
+    folder = Path(folder)
+    cal = _load(folder) if cal is None else cal
     budgets = {}
     for N, steps in cal["budgets"]:
         if int(N) != int(grid):
@@ -88,7 +90,8 @@ def select(folders, grid=32):
     """Rank the calibrations in ``folders`` by (S1) at ``grid`` -> the selection dict (winner first)."""
     if not folders:
         raise InputError("--from", "folders", "none given", "name at least one calibration folder")
-    cands = [candidate(f, grid) for f in folders]
+    cals = {str(f): _load(f) for f in folders}                   # each calibration.json read once, for every grid
+    cands = [candidate(f, grid, cals[str(f)]) for f in folders]
     for c in cands:
         if not c["budgets"]:
             raise InputError(c["folder"], "budgets", f"none at N = {grid}",
@@ -104,7 +107,7 @@ def select(folders, grid=32):
             "rule": "lowest geometric mean over the common budgets of the median held-out relMSE (Eq. S1 of "
                     "harness.calibration.select)",
             "winner": cands[0]["folder"], "candidates": cands,
-            "other_grids": _other_grids(folders, cands[0], grid)}
+            "other_grids": _other_grids(cals, cands[0], grid)}
 
 
 def _rank(cands):
@@ -119,23 +122,24 @@ def _rank(cands):
     return common
 
 
-def _held_out_at(folder, grid):
+def _held_out_at(folder, grid, cal):
     """:func:`candidate` at ``grid``, or None where a budget there has no held-out validation."""
     try:
-        return candidate(folder, grid)
+        return candidate(folder, grid, cal)
     except InputError:
         return None
 
 
-def _other_grids(folders, winner, grid):
-    """At each other grid the winner holds: (S1) over the candidates that hold that grid's budgets ->
-    ``[{"grid", "budgets", "leader", "winner_rank", "candidates": [{"folder", "score"}]}]``."""
+def _other_grids(cals, winner, grid):
+    """At each other grid the winner holds: (S1) over the candidates (``cals``: folder -> its calibration.json)
+    that hold that grid's budgets -> ``[{"grid", "budgets", "leader", "winner_rank", "candidates": [{"folder",
+    "score"}]}]``."""
     out = []
     for n in sorted(set(winner["grids"]) - {int(grid)}):
-        mine = _held_out_at(winner["folder"], n)
+        here = [c for c in (_held_out_at(f, n, cal) for f, cal in cals.items()) if c]
+        mine = next((c for c in here if c["folder"] == winner["folder"]), None)
         if mine is None:
             continue                                                # not validated there: nothing to rank
-        here = [c for c in (_held_out_at(f, n) for f in folders) if c]
         here = [c for c in here if set(mine["budgets"]) <= set(c["budgets"])]   # on the winner's budgets there
         common = _rank(here)
         if not common:

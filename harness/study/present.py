@@ -241,7 +241,7 @@ def _other_grids_text(t):
                                                f", behind `{lead['folder']}` ({g(lead['score'])})"))
     if not parts:
         return ""
-    return (f" The selection ranks at N = {t.get('grid', 32)}; by the same rule (Eq. S1 of `harness/calibration/select.py`) over the "
+    return (f" The selection ranks at N = {t['grid']}; by the same rule (Eq. S1 of `harness/calibration/select.py`) over the "
             "candidates that hold another grid, " + "; ".join(parts) + ": a render at that grid may take the leader "
             "there instead.")
 
