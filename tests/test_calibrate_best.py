@@ -123,13 +123,15 @@ def test_the_command_writes_the_winner_and_reads_it_back(tmp_path, capsys):
     ("no_grid", "budgets: none at N = 32"),
     ("missing", "calibrated.toml: is missing"),
     ("foreign_out", "output: is a non-empty folder that the harness did not write"),
+    ("no_held_out", "results.N=32 steps=8.targets.median_held_out_relmse: is missing"),
 ])
 def test_bad_input_is_one_line(tmp_path, capsys, case, needle):
     a = fake(tmp_path / "a", [0.1, 0.1, 0.1])
     b = {"other_scenes": lambda: fake(tmp_path / "b", [0.1, 0.1, 0.1], scenes=["a", "b"]),
          "no_grid": lambda: fake(tmp_path / "b", [0.1, 0.1, 0.1], grid=16),
          "missing": lambda: str(tmp_path),
-         "foreign_out": lambda: a}[case]()
+         "foreign_out": lambda: a,
+         "no_held_out": lambda: _without_held_out(fake(tmp_path / "b", [0.1, 0.1, 0.1]))}[case]()
     out = tmp_path / "out"
     if case == "foreign_out":
         out.mkdir()
@@ -138,3 +140,12 @@ def test_bad_input_is_one_line(tmp_path, capsys, case, needle):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and needle in err[0]
     assert case == "foreign_out" and (out / "mine.txt").read_text() == "not the harness's" or not out.exists()
+
+
+def _without_held_out(folder):
+    """``folder`` (a fake calibration) with its first budget's held-out validation removed."""
+    path = Path(folder) / "calibration.json"
+    cal = json.loads(path.read_text())
+    del cal["results"]["N=32 steps=8"]["targets"]["median_held_out_relmse"]
+    path.write_text(json.dumps(cal))
+    return folder
