@@ -223,6 +223,14 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
         "calibration_form_collision_interior_depth1_shade0p5_trilinear_loss"
     assert names["collision_interior_shade_trilinear_n64"] == \
         "calibration_collision_interior_depth1_shade1_trilinear_n64"
+    assert names["collision_interior_depth05_shade_trilinear"] == \
+        "calibration_collision_interior_depth0p5_shade1_trilinear"
+    assert names["collision_interior_depth05_shade_trilinear_loss_form"] == \
+        "calibration_form_collision_interior_depth0p5_shade1_trilinear_loss"
+    assert names["collision_interior_depth05_shade_trilinear_radiance_form"] == \
+        "calibration_form_collision_interior_depth0p5_shade1_trilinear_radiance"
+    assert names["collision_interior_depth05_shade_trilinear_n64"] == \
+        "calibration_collision_interior_depth0p5_shade1_trilinear_n64"
     for page in names.values():                         # every committed calibration's page is committed
         if page != "calibration_collision_n16" and page != "calibration_diffusion_n16":
             assert (ROOT / "docs" / "benchmarks" / f"{page}.md").is_file(), page

@@ -461,7 +461,10 @@ def test_study_names_a_calibration_after_its_extensions():
     assert labels["collision_delta_eddington"] == "calibrated collision (δ-Eddington)"
     assert labels["collision_interior_shade_trilinear"] == \
         "calibrated collision (interior, depth 1 mfp', read 1 cell deep, trilinear)"
+    assert labels["collision_interior_depth05_shade_trilinear"] == \
+        "calibrated collision (interior, depth 0.5 mfp', read 1 cell deep, trilinear)"
     same_fit = {"best", "collision_n16", "collision_n64", "diffusion_n16",      # the same fits at another grid
-                "collision_interior_shade_trilinear_n16", "collision_interior_shade_trilinear_n64"}
+                "collision_interior_shade_trilinear_n16", "collision_interior_shade_trilinear_n64",
+                "collision_interior_depth05_shade_trilinear_n16", "collision_interior_depth05_shade_trilinear_n64"}
     assert len({v for k, v in labels.items() if k not in same_fit}) == len(labels) - len(same_fit)
     assert not any(is_extension({"method": "sslpv", "family": v}) for v in labels.values())
