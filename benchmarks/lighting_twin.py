@@ -17,13 +17,13 @@ renderer setting and budget, over a scan of ``sigma_scale``:
   with the two it allows), the paper's skip of 2, the collision mapping with ``skip = 0`` and with
   delta-Eddington scaling, and the collision mapping with the extensions of the committed calibrations
   ``collision_interior_shade`` and ``collision_interior_shade_trilinear`` (``interior``, an injection 1 mfp'
-  deep, the grid read 1 cell deep, by cell and trilinear), at ``sigma_scale`` from 1e-4 to 1e3 (a third of a
-  decade apart);
+  deep, the grid read 1 cell deep, by cell and trilinear) and ``collision_interior_depth05_shade_trilinear`` (the
+  same, trilinear, injected 0.5 mfp' deep), at ``sigma_scale`` from 1e-4 to 1e3 (a third of a decade apart);
 * per budget and setting: the attainable interval of ``rho_A / rho_B`` (W3), whether it meets the
   band ``[0.64, 1.5625]`` that both scenes in ``[0.8, 1.25]`` need, and the least energy ratio the
   front-lit twin must have when the back-lit scene is in range (W4);
 * the best committed calibration (``baselines/calibrated/best``), the collision family's loss form, and the
-  loss forms of those extensions rendered on both scenes.
+  loss forms of those extensions (and the half-depth setting's radiance form) rendered on both scenes.
 
 Usage: ``python benchmarks/lighting_twin.py [--scene backlit_sphere] [--grid 32] [--photons 65536]
 [--truth auto|tracer|mitsuba] [--mitsuba-check] [--write]`` (about 20 minutes on 2 cores, and the twin's
@@ -57,7 +57,8 @@ BEST = Path(__file__).resolve().parents[1] / "baselines" / "calibrated" / "best"
 #: committed calibrations rendered beside the best (less the one the best is): the paper's setting's loss form and
 #: those of the extensions that :func:`settings` scans last
 EXTENDED = tuple(BEST.parents[1] / name / "calibrated.toml" for name in (
-    "collision_loss_form", "collision_interior_shade_loss_form", "collision_interior_shade_trilinear_loss_form"))
+    "collision_loss_form", "collision_interior_shade_loss_form", "collision_interior_shade_trilinear_loss_form",
+    "collision_interior_depth05_shade_trilinear_loss_form", "collision_interior_depth05_shade_trilinear_radiance_form"))
 
 
 def settings():
@@ -72,10 +73,11 @@ def settings():
     out.append(("collision, vacuum, skip 0", {"mapping": "collision", "outside": "vacuum", "skip": 0}))
     out.append(("collision, vacuum, delta-Eddington", {"mapping": "collision", "outside": "vacuum",
                                                         "phase_scaling": "delta-eddington"}))
-    for lookup in ("cell", "trilinear"):     # the committed calibrations with an injection and a read at depth
-        out.append((f"collision, interior, depth 1 mfp', read 1 cell deep, {lookup} lookup",
-                    {"mapping": "collision", "outside": "interior", "inject_depth": 1.0, "shade_depth": 1.0,
-                     "lookup": lookup}))
+    # the committed calibrations with an injection and a read at depth
+    for depth, lookup in ((1, "cell"), (1, "trilinear"), (0.5, "trilinear")):
+        out.append((f"collision, interior, depth {depth:g} mfp', read 1 cell deep, {lookup} lookup",
+                    {"mapping": "collision", "outside": "interior", "inject_depth": float(depth),
+                     "shade_depth": 1.0, "lookup": lookup}))
     return out
 
 
