@@ -209,28 +209,24 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
             else "calibration_table"
         names[folder.name] = mods[kind].page_name(json.loads((folder / "calibration.json").read_text()))[0]
     assert len(set(names.values())) == len(names), names
-    assert names["diffusion_exitance"] == "calibration_diffusion_extrapolated_boundary"
-    assert names["collision_extrapolated"] == "calibration_collision_extrapolated"
-    assert names["collision_loss_form"] == "calibration_form_collision_loss"
-    assert names["collision_extrapolated_loss_form"] == "calibration_form_collision_extrapolated_loss"
-    assert names["collision_interior_shade"] == "calibration_collision_interior_depth1_shade1"
-    assert names["collision_interior_shade15"] == "calibration_collision_interior_depth1_shade1p5"
-    assert names["collision_interior_shade_trilinear"] == "calibration_collision_interior_depth1_shade1_trilinear"
-    assert names["collision_interior_shade_trilinear_loss_form"] == \
-        "calibration_form_collision_interior_depth1_shade1_trilinear_loss"
-    assert names["collision_interior_shade05_trilinear"] == "calibration_collision_interior_depth1_shade0p5_trilinear"
-    assert names["collision_interior_shade05_trilinear_loss_form"] == \
-        "calibration_form_collision_interior_depth1_shade0p5_trilinear_loss"
-    assert names["collision_interior_shade_trilinear_n64"] == \
-        "calibration_collision_interior_depth1_shade1_trilinear_n64"
-    assert names["collision_interior_depth05_shade_trilinear"] == \
-        "calibration_collision_interior_depth0p5_shade1_trilinear"
-    assert names["collision_interior_depth05_shade_trilinear_loss_form"] == \
-        "calibration_form_collision_interior_depth0p5_shade1_trilinear_loss"
-    assert names["collision_interior_depth05_shade_trilinear_radiance_form"] == \
-        "calibration_form_collision_interior_depth0p5_shade1_trilinear_radiance"
-    assert names["collision_interior_depth05_shade_trilinear_n64"] == \
-        "calibration_collision_interior_depth0p5_shade1_trilinear_n64"
+    expected = {                                        # the page each folder's settings name
+        "diffusion_exitance": "calibration_diffusion_extrapolated_boundary",
+        "collision_extrapolated": "calibration_collision_extrapolated",
+        "collision_loss_form": "calibration_form_collision_loss",
+        "collision_extrapolated_loss_form": "calibration_form_collision_extrapolated_loss",
+        "collision_interior_shade": "calibration_collision_interior_depth1_shade1",
+        "collision_interior_shade15": "calibration_collision_interior_depth1_shade1p5",
+        "collision_interior_shade_trilinear": "calibration_collision_interior_depth1_shade1_trilinear",
+        "collision_interior_shade_trilinear_loss_form": "calibration_form_collision_interior_depth1_shade1_trilinear_loss",
+        "collision_interior_shade05_trilinear": "calibration_collision_interior_depth1_shade0p5_trilinear",
+        "collision_interior_shade05_trilinear_loss_form": "calibration_form_collision_interior_depth1_shade0p5_trilinear_loss",
+        "collision_interior_shade_trilinear_n64": "calibration_collision_interior_depth1_shade1_trilinear_n64",
+        "collision_interior_depth05_shade_trilinear": "calibration_collision_interior_depth0p5_shade1_trilinear",
+        "collision_interior_depth05_shade_trilinear_loss_form": "calibration_form_collision_interior_depth0p5_shade1_trilinear_loss",
+        "collision_interior_depth05_shade_trilinear_radiance_form": "calibration_form_collision_interior_depth0p5_shade1_trilinear_radiance",
+        "collision_interior_depth05_shade_trilinear_n64": "calibration_collision_interior_depth0p5_shade1_trilinear_n64",
+    }
+    assert {k: names.get(k) for k in expected} == expected
     for page in names.values():                         # every committed calibration's page is committed
         if page != "calibration_collision_n16" and page != "calibration_diffusion_n16":
             assert (ROOT / "docs" / "benchmarks" / f"{page}.md").is_file(), page

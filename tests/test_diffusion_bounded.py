@@ -76,15 +76,16 @@ class TestSlab:
 
 
 class TestSphere:
-    def test_point_source_at_the_centre(self):
-        """Eq. (D2) at N = 32: escaping power and the fluence at 3 <= r/dx <= a/dx - 3, within 5 %."""
-        out, _ = bounded.sphere_lattice(SPHERE, 32)
+    @pytest.mark.parametrize("N", [32, 64])
+    def test_point_source_at_the_centre(self, N):
+        """Eq. (D2) at N = 32 and 64: escaping power and the fluence at 3 <= r/dx <= a/dx - 3, within 5 %."""
+        out, _ = bounded.sphere_lattice(SPHERE, N)
         for med, o in zip(SPHERE, out):
             esc_d, _ = bounded.sphere_diffusion(*med, 1.0, _zb(*med))
             print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, phi ratio {o['ratio'].min():.3f}..{o['ratio'].max():.3f}")
             assert o["escape"] == pytest.approx(esc_d, rel=TOL)
             assert np.all(np.abs(o["ratio"] - 1.0) < TOL)
-            assert o["kappa"] == pytest.approx(float(diffusion.diffusion_coefficients(*med)[2]) * 2 / 32, rel=1e-12)
+            assert o["kappa"] == pytest.approx(float(diffusion.diffusion_coefficients(*med)[2]) * 2 / N, rel=1e-12)
 
 
 class TestPartialSink:
@@ -109,14 +110,17 @@ class TestSphereLitFromOneSide:
         assert esc == pytest.approx(bounded.sphere_diffusion(*SPHERE[0], 1.0, 0.2)[0], rel=1e-9)
         assert far == pytest.approx(0.5 * esc, rel=1e-9)
 
-    def test_source_one_mean_free_path_below_the_pole(self):
-        """Eq. (D2') at N = 32: all escaping power and the far hemisphere's (the transmitted light), within 5 %."""
-        out, _ = bounded.sphere_lattice(SPHERE, 32, depth_mfp=1.0)   # pole on a cell face, as in a render
+    @pytest.mark.parametrize("N", [32, 64])
+    def test_source_one_mean_free_path_below_the_pole(self, N):
+        """Eq. (D2') at N = 32 and 64: all escaping power and the far hemisphere's (the transmitted light), within
+        5 %."""
+        out, _ = bounded.sphere_lattice(SPHERE, N, depth_mfp=1.0)    # pole on a cell face, as in a render
+        h = N // 2                                                    # cells per radius
         for med, o in zip(SPHERE, out):
             sigma_tp = med[0] * (1 - med[1]) + med[0] * med[1] * (1 - med[2])
             # the source cell: next to the +x axis (an even grid), its centre nearest 1 / sigma_t' below the pole
-            x = (np.floor((1.0 - 1.0 / sigma_tp) * 16) + 0.5) / 16
-            r0 = float(np.sqrt(x**2 + 2 * (0.5 / 16) ** 2))
+            x = (np.floor((1.0 - 1.0 / sigma_tp) * h) + 0.5) / h
+            r0 = float(np.sqrt(x**2 + 2 * (0.5 / h) ** 2))
             esc_d, far_d = bounded.sphere_side_diffusion(*med, 1.0, _zb(*med), r0)
             print(f"{med}: escape {o['escape']:.4f} vs {esc_d:.4f}, far {o['escape_far']:.4f} vs {far_d:.4f}")
             assert o["escape"] == pytest.approx(esc_d, rel=TOL)

@@ -862,4 +862,9 @@ MUTATIONS = (
              ("tests/test_connection_power.py::test_the_points_are_the_delivered_power_and_the_spread_page_reads_their_"
               "tail",),
              "the spread page's tail column sums the lightest points, not the heaviest, so a heavy tail reads as none"),
+    Mutation("bad_input_exits_as_an_environment_problem", "cli", "harness/cli/main.py",
+             '    except InputError as exc:\n        print(f"error: {exc}", file=sys.stderr)\n        return 2\n',
+             '    except InputError as exc:\n        print(f"error: {exc}", file=sys.stderr)\n        return 3\n',
+             ("tests/test_bad_input.py",),
+             "bad input exits 3 (the environment's code) instead of 2"),
 ) + RIVALS + FORM + REFERENCE
