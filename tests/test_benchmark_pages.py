@@ -218,8 +218,7 @@ def test_calibration_pages_are_named_after_their_extensions(monkeypatch):
         "collision_interior_shade15": "calibration_collision_interior_depth1_shade1p5",
         "collision_interior_shade_trilinear": "calibration_collision_interior_depth1_shade1_trilinear",
         "collision_interior_shade_trilinear_loss_form": "calibration_form_collision_interior_depth1_shade1_trilinear_loss",
-        "collision_interior_shade_trilinear_radiance_form":
-            "calibration_form_collision_interior_depth1_shade1_trilinear_radiance",
+        "collision_interior_shade_trilinear_radiance_form": "calibration_form_collision_interior_depth1_shade1_trilinear_radiance",
         "collision_interior_shade05_trilinear": "calibration_collision_interior_depth1_shade0p5_trilinear",
         "collision_interior_shade05_trilinear_loss_form": "calibration_form_collision_interior_depth1_shade0p5_trilinear_loss",
         "collision_interior_shade_trilinear_n64": "calibration_collision_interior_depth1_shade1_trilinear_n64",
